@@ -1,0 +1,58 @@
+"""The project's error tree.
+
+The root lives here because every package may import :mod:`roadnets`; :mod:`mapmatch`
+re-exports it. Every leaf also subclasses the matching built-in exception, so callers that
+catch ``ValueError`` or ``OSError`` keep working.
+"""
+
+from __future__ import annotations
+
+
+class MapMatchError(Exception):
+    """Base for every error this project raises on purpose."""
+
+
+class RoadNetworkError(MapMatchError):
+    """A road network could not be loaded, compiled or cached."""
+
+
+class NetworkSourceNotFoundError(RoadNetworkError, FileNotFoundError):
+    """The OSM extract named by the caller does not exist."""
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+        msg = f"road network source {path!r} does not exist; check the path"
+        super().__init__(msg)
+
+
+class InvalidNetworkSourceError(RoadNetworkError, ValueError):
+    """The file is not a readable OSM extract (wrong format, truncated or corrupt)."""
+
+    def __init__(self, path: str, reason: str) -> None:
+        self.path, self.reason = path, reason
+        msg = f"road network source {path!r} is not a readable OSM extract: {reason}"
+        super().__init__(msg)
+
+
+class NoDrivableRoadsError(RoadNetworkError, ValueError):
+    """The extract holds no drivable road."""
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+        msg = (
+            f"road network source {path!r} has no drivable roads "
+            "(motorway .. residential, service, *_link); is it the right extract?"
+        )
+        super().__init__(msg)
+
+
+class CacheError(RoadNetworkError, OSError):
+    """The compiled-network cache folder cannot be used."""
+
+    def __init__(self, cache_dir: str, reason: str) -> None:
+        self.cache_dir, self.reason = cache_dir, reason
+        msg = (
+            f"network cache folder {cache_dir!r} cannot be used: {reason}; "
+            "pass cache_dir= or set MAPMATCH_CACHE_DIR to a writable folder"
+        )
+        super().__init__(msg)
