@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from roadnets.arrays import NetworkArrays
+from roadnets.drivable import ROAD_CLASSES
 from roadnets.errors import (
     CacheError,
     InvalidNetworkSourceError,
@@ -10,12 +12,25 @@ from roadnets.errors import (
     NoDrivableRoadsError,
     RoadNetworkError,
 )
+from roadnets.loader import DEFAULT_NETWORK, default_network_path, load
+from roadnets.network import NetworkInfo, RoadNetwork
+from roadnets.routing import PathTable
+from roadnets.spatial import EdgeHits
 
 __all__ = [
+    "DEFAULT_NETWORK",
+    "ROAD_CLASSES",
     "CacheError",
+    "EdgeHits",
     "InvalidNetworkSourceError",
     "MapMatchError",
+    "NetworkArrays",
+    "NetworkInfo",
     "NetworkSourceNotFoundError",
     "NoDrivableRoadsError",
+    "PathTable",
+    "RoadNetwork",
     "RoadNetworkError",
+    "default_network_path",
+    "load",
 ]

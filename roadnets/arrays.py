@@ -1,0 +1,121 @@
+"""The compiled road network: flat numpy arrays the matcher's hot path works on.
+
+Everything is indexed by position: nodes ``0..N-1``, directed edges ``0..E-1``. Metric
+coordinates are in the network's projected CRS. The arrays are written to and read from disk
+as ``.npy`` files so that several processes can memory-map one copy.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ["NetworkArrays"]
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+Int32Array = npt.NDArray[np.int32]
+
+
+@dataclass(frozen=True, slots=True)
+class NetworkArrays:
+    """
+    Flat arrays of a compiled directed road network.
+
+    Attributes
+    ----------
+    node_osm_id
+        OSM node id of each graph node.
+    node_x, node_y
+        Node position, metres in the projected CRS.
+    edge_u, edge_v
+        Start and end node (indices) of each directed edge.
+    edge_key
+        Key distinguishing parallel edges between the same ``u`` and ``v`` (networkx style).
+    edge_way_id
+        OSM way id each edge comes from.
+    edge_length_m
+        Length along the geometry, metres.
+    edge_speed_mps
+        Speed limit (tagged ``maxspeed`` or the class default), metres per second.
+    edge_class
+        Index into :data:`roadnets.drivable.ROAD_CLASSES`.
+    edge_oneway
+        Whether the road is one-way (no twin in the other direction).
+    edge_twin
+        The edge running the same geometry the other way, or -1.
+    edge_geom_ptr
+        Edge ``e``'s vertices are ``geom_*[edge_geom_ptr[e]:edge_geom_ptr[e + 1]]``.
+    geom_x, geom_y
+        Vertex positions, metres, in driving order for each edge.
+    geom_cum_m
+        Distance along the edge from its start to each vertex, metres.
+    out_ptr, out_edge
+        CSR adjacency: edges leaving node ``n`` are ``out_edge[out_ptr[n]:out_ptr[n + 1]]``.
+    seg_start, seg_edge
+        Segments in the spatial index: segment ``s`` runs from vertex ``seg_start[s]`` to the
+        next one and belongs to edge ``seg_edge[s]`` (one per geometry; twins share it).
+    banned_in, banned_out
+        Turn restrictions: the move from edge ``banned_in[i]`` onto ``banned_out[i]`` is banned.
+    """
+
+    node_osm_id: IntArray
+    node_x: FloatArray
+    node_y: FloatArray
+    edge_u: Int32Array
+    edge_v: Int32Array
+    edge_key: Int32Array
+    edge_way_id: IntArray
+    edge_length_m: FloatArray
+    edge_speed_mps: FloatArray
+    edge_class: npt.NDArray[np.int8]
+    edge_oneway: npt.NDArray[np.bool_]
+    edge_twin: Int32Array
+    edge_geom_ptr: IntArray
+    geom_x: FloatArray
+    geom_y: FloatArray
+    geom_cum_m: FloatArray
+    out_ptr: IntArray
+    out_edge: Int32Array
+    seg_start: IntArray
+    seg_edge: Int32Array
+    banned_in: Int32Array
+    banned_out: Int32Array
+
+    @property
+    def n_nodes(self) -> int:
+        """Number of graph nodes."""
+        return len(self.node_osm_id)
+
+    @property
+    def n_edges(self) -> int:
+        """Number of directed edges."""
+        return len(self.edge_u)
+
+    def save(self, folder: Path) -> dict[str, int]:
+        """Write every array as ``<name>.npy`` into ``folder``; return the file sizes."""
+        sizes: dict[str, int] = {}
+        for field in dataclasses.fields(self):
+            path = folder / f"{field.name}.npy"
+            np.save(path, getattr(self, field.name), allow_pickle=False)
+            sizes[field.name] = path.stat().st_size
+        return sizes
+
+    @classmethod
+    def load(cls, folder: Path, *, mmap: bool = True) -> NetworkArrays:
+        """Read the arrays written by :meth:`save`, memory-mapped read-only by default."""
+        mode = "r" if mmap else None
+        values = {
+            field.name: np.load(folder / f"{field.name}.npy", mmap_mode=mode, allow_pickle=False)
+            for field in dataclasses.fields(cls)
+        }
+        return cls(**values)
+
+    @classmethod
+    def file_names(cls) -> list[str]:
+        """Names of the files :meth:`save` writes."""
+        return [f"{field.name}.npy" for field in dataclasses.fields(cls)]

@@ -1,0 +1,140 @@
+"""On-disk cache of compiled networks, keyed by the source's content hash and the format.
+
+A cache entry is a folder of ``.npy`` arrays (memory-mappable, so server and batch workers
+share one copy through the page cache) plus ``meta.json`` with a checksum of every file. An
+entry is written to a temporary folder and renamed into place, so a crash never leaves half an
+entry; an entry whose files do not match their checksums is removed and rebuilt.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import logging
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from roadnets.arrays import NetworkArrays
+from roadnets.errors import CacheError
+
+__all__ = ["FORMAT_VERSION", "default_cache_dir", "entry_folder", "read_entry", "write_entry"]
+
+#: Bump whenever the compiled arrays change meaning; old entries are then ignored.
+FORMAT_VERSION = 1
+
+_log = logging.getLogger("roadnets")
+
+
+def default_cache_dir() -> Path:
+    """``$MAPMATCH_CACHE_DIR``, else ``$XDG_CACHE_HOME/mapmatch``, else ``~/.cache/mapmatch``."""
+    explicit = os.environ.get("MAPMATCH_CACHE_DIR")
+    if explicit:
+        return Path(explicit)
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "mapmatch"
+
+
+def file_digest(path: Path) -> str:
+    """SHA-256 of a file's content, hex."""
+    digest = hashlib.sha256()
+    with path.open("rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def entry_folder(cache_dir: Path, source_digest: str) -> Path:
+    """The folder of the entry for a source with this digest under the current format."""
+    return cache_dir / f"{source_digest[:24]}-v{FORMAT_VERSION}"
+
+
+def ensure_writable(cache_dir: Path) -> None:
+    """
+    Create the cache folder if needed and check that files can be written in it.
+
+    Raises
+    ------
+    CacheError
+        The folder cannot be created or written.
+    """
+    try:
+        cache_dir.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=cache_dir, prefix=".probe-"):
+            pass
+    except OSError as exc:
+        raise CacheError(str(cache_dir), exc.strerror or str(exc)) from exc
+
+
+def _checksum(path: Path) -> str:
+    digest = hashlib.blake2b(digest_size=16)
+    with path.open("rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def write_entry(
+    folder: Path, arrays: NetworkArrays, meta: dict[str, Any], extra: dict[str, Any]
+) -> None:
+    """
+    Write an entry atomically: into a temporary sibling folder, then rename it into place.
+
+    ``extra`` maps file names to JSON-serialisable side data (way names...) stored with it.
+
+    Raises
+    ------
+    CacheError
+        The cache folder cannot be written.
+    """
+    parent = folder.parent
+    try:
+        tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}-", dir=parent))
+    except OSError as exc:
+        raise CacheError(str(parent), exc.strerror or str(exc)) from exc
+    try:
+        arrays.save(tmp)
+        for name, value in extra.items():
+            (tmp / name).write_text(json.dumps(value), encoding="utf-8")
+        files = {name: _checksum(tmp / name) for name in NetworkArrays.file_names()}
+        payload = {**meta, "format_version": FORMAT_VERSION, "checksums": files}
+        (tmp / "meta.json").write_text(json.dumps(payload), encoding="utf-8")
+        try:
+            tmp.rename(folder)
+        except OSError:
+            if not (folder / "meta.json").exists():  # not another process that won the race
+                shutil.rmtree(folder, ignore_errors=True)
+                tmp.rename(folder)
+    except OSError as exc:
+        raise CacheError(str(parent), exc.strerror or str(exc)) from exc
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def read_entry(folder: Path) -> tuple[NetworkArrays, dict[str, Any]] | None:
+    """
+    Read and verify an entry; ``None`` when there is none or it was corrupt (then removed).
+    """
+    meta_path = folder / "meta.json"
+    if not meta_path.exists():
+        return None
+    try:
+        meta = json.loads(meta_path.read_text(encoding="utf-8"))
+        if meta.get("format_version") != FORMAT_VERSION:
+            raise ValueError("format version differs")
+        checksums: dict[str, str] = meta["checksums"]
+        if set(checksums) != set(NetworkArrays.file_names()):
+            raise ValueError("array files differ")
+        for name, expected in checksums.items():
+            if _checksum(folder / name) != expected:
+                raise ValueError(f"checksum of {name} differs")
+        arrays = NetworkArrays.load(folder)
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        _log.warning("network cache entry %s is corrupt (%s); rebuilding it", folder, exc)
+        with contextlib.suppress(OSError):
+            shutil.rmtree(folder)
+        return None
+    return arrays, meta

@@ -1,0 +1,194 @@
+"""Compile drivable OSM ways into the directed network arrays.
+
+Ways are split at every node shared with another way (or repeated within one) and at their
+ends, as osmnx's simplified graphs are; each piece becomes one directed edge per permitted
+direction.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+
+import numpy as np
+
+from roadnets.arrays import NetworkArrays
+from roadnets.drivable import ROAD_CLASSES, direction_flags, road_speed_kph
+from roadnets.osm_reader import OsmExtract, TurnRestriction
+from roadnets.projection import Projector, utm_epsg
+
+__all__ = ["choose_projector", "compile_network"]
+
+_CLASS_INDEX = {name: i for i, name in enumerate(ROAD_CLASSES)}
+
+
+def choose_projector(extract: OsmExtract) -> Projector:
+    """The UTM zone of the centre of the extract's drivable ways."""
+    lon = np.concatenate([way.lon for way in extract.ways])
+    lat = np.concatenate([way.lat for way in extract.ways])
+    centre_lon = 0.5 * (float(lon.min()) + float(lon.max()))
+    centre_lat = 0.5 * (float(lat.min()) + float(lat.max()))
+    return Projector(utm_epsg(centre_lon, centre_lat))
+
+
+def compile_network(extract: OsmExtract, projector: Projector) -> NetworkArrays:
+    """
+    Build the directed network arrays from the drivable ways of an extract.
+
+    Parameters
+    ----------
+    extract
+        Drivable ways and turn restrictions (non-empty).
+    projector
+        The metric CRS the geometry is stored in.
+    """
+    ways = extract.ways
+    all_ids = np.concatenate([way.node_ids for way in ways])
+    x_all, y_all = projector.forward(
+        np.concatenate([way.lon for way in ways]), np.concatenate([way.lat for way in ways])
+    )
+    unique_ids, counts = np.unique(all_ids, return_counts=True)
+    ends = np.concatenate([[way.node_ids[0], way.node_ids[-1]] for way in ways])
+    is_graph_node = set(unique_ids[counts >= 2].tolist()) | set(ends.tolist())
+
+    node_index: dict[int, int] = {}
+    node_xy: list[tuple[float, float]] = []
+    edges: list[tuple[int, int, int, float, int, bool, int]] = []  # u, v, way, speed, cls, ow, twin
+    geoms: list[tuple[np.ndarray, np.ndarray]] = []
+    start = 0
+    for way in ways:
+        n = len(way.node_ids)
+        xs, ys = x_all[start : start + n], y_all[start : start + n]
+        start += n
+        forward, backward = direction_flags(way.tags)
+        speed_fwd = road_speed_kph(way.tags, forward=True) / 3.6
+        speed_bwd = road_speed_kph(way.tags, forward=False) / 3.6
+        cls = _CLASS_INDEX[way.tags["highway"]]
+        cuts = [i for i, nid in enumerate(way.node_ids.tolist()) if nid in is_graph_node]
+        for a, b in zip(cuts[:-1], cuts[1:], strict=True):
+            gx, gy = xs[a : b + 1], ys[a : b + 1]
+            u = _node(node_index, node_xy, int(way.node_ids[a]), float(gx[0]), float(gy[0]))
+            v = _node(node_index, node_xy, int(way.node_ids[b]), float(gx[-1]), float(gy[-1]))
+            oneway = not (forward and backward)
+            first = len(edges)
+            if forward:
+                edges.append((u, v, way.way_id, speed_fwd, cls, oneway, -1))
+                geoms.append((gx, gy))
+            if backward:
+                twin = first if forward else -1
+                edges.append((v, u, way.way_id, speed_bwd, cls, oneway, twin))
+                geoms.append((gx[::-1], gy[::-1]))
+                if forward:
+                    edges[first] = (*edges[first][:6], first + 1)
+    return _to_arrays(node_index, node_xy, edges, geoms, extract.restrictions)
+
+
+def _node(
+    index: dict[int, int], xy: list[tuple[float, float]], osm_id: int, x: float, y: float
+) -> int:
+    found = index.get(osm_id)
+    if found is None:
+        found = index[osm_id] = len(xy)
+        xy.append((x, y))
+    return found
+
+
+def _to_arrays(
+    node_index: dict[int, int],
+    node_xy: list[tuple[float, float]],
+    edges: list[tuple[int, int, int, float, int, bool, int]],
+    geoms: list[tuple[np.ndarray, np.ndarray]],
+    restrictions: list[TurnRestriction],
+) -> NetworkArrays:
+    n_nodes, n_edges = len(node_xy), len(edges)
+    node_osm_id = np.fromiter(node_index.keys(), dtype=np.int64, count=n_nodes)
+    xy = np.asarray(node_xy, dtype=np.float64).reshape(n_nodes, 2)
+    u = np.array([e[0] for e in edges], dtype=np.int32)
+    v = np.array([e[1] for e in edges], dtype=np.int32)
+    keys = np.zeros(n_edges, dtype=np.int32)
+    seen: dict[tuple[int, int], int] = defaultdict(int)
+    for i, (a, b) in enumerate(zip(u.tolist(), v.tolist(), strict=True)):
+        keys[i] = seen[(a, b)]
+        seen[(a, b)] += 1
+
+    sizes = np.array([len(g[0]) for g in geoms], dtype=np.int64)
+    geom_ptr = np.concatenate(([0], np.cumsum(sizes)))
+    geom_x = np.concatenate([g[0] for g in geoms]).astype(np.float64)
+    geom_y = np.concatenate([g[1] for g in geoms]).astype(np.float64)
+    step = np.hypot(np.diff(geom_x), np.diff(geom_y))
+    step[geom_ptr[1:-1] - 1] = 0.0  # no step across two edges
+    cum = np.concatenate(([0.0], np.cumsum(step)))
+    geom_cum = cum - np.repeat(cum[geom_ptr[:-1]], sizes)
+    length = geom_cum[geom_ptr[1:] - 1].copy()
+
+    order = np.argsort(u, kind="stable")
+    out_ptr = np.concatenate(([0], np.cumsum(np.bincount(u, minlength=n_nodes)))).astype(np.int64)
+
+    twin = np.array([e[6] for e in edges], dtype=np.int32)
+    indexed = np.flatnonzero((twin < 0) | (np.arange(n_edges) < twin))
+    seg_counts = sizes[indexed] - 1
+    seg_edge = np.repeat(indexed.astype(np.int32), seg_counts)
+    seg_start = np.repeat(geom_ptr[indexed], seg_counts) + _ranges(seg_counts)
+
+    way_id = np.array([e[2] for e in edges], dtype=np.int64)
+    banned_in, banned_out = _banned_turns(restrictions, u, v, way_id, node_osm_id, out_ptr, order)
+    return NetworkArrays(
+        node_osm_id=node_osm_id,
+        node_x=xy[:, 0].copy(),
+        node_y=xy[:, 1].copy(),
+        edge_u=u,
+        edge_v=v,
+        edge_key=keys,
+        edge_way_id=way_id,
+        edge_length_m=length,
+        edge_speed_mps=np.array([e[3] for e in edges], dtype=np.float64),
+        edge_class=np.array([e[4] for e in edges], dtype=np.int8),
+        edge_oneway=np.array([e[5] for e in edges], dtype=np.bool_),
+        edge_twin=twin,
+        edge_geom_ptr=geom_ptr.astype(np.int64),
+        geom_x=geom_x,
+        geom_y=geom_y,
+        geom_cum_m=geom_cum,
+        out_ptr=out_ptr,
+        out_edge=order.astype(np.int32),
+        seg_start=seg_start.astype(np.int64),
+        seg_edge=seg_edge,
+        banned_in=banned_in,
+        banned_out=banned_out,
+    )
+
+
+def _ranges(counts: np.ndarray) -> np.ndarray:
+    """``[0..c0-1, 0..c1-1, ...]`` for an array of counts."""
+    total = int(counts.sum())
+    starts = np.repeat(np.cumsum(counts) - counts, counts)
+    return np.arange(total, dtype=np.int64) - starts
+
+
+def _banned_turns(
+    restrictions: list[TurnRestriction],
+    u: np.ndarray,
+    v: np.ndarray,
+    way_id: np.ndarray,
+    node_osm_id: np.ndarray,
+    out_ptr: np.ndarray,
+    out_edge: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Edge pairs ``(in, out)`` a turn restriction forbids at its via node."""
+    by_way: dict[int, list[int]] = defaultdict(list)
+    for e, w in enumerate(way_id.tolist()):
+        by_way[w].append(e)
+    node_of = {int(osm): i for i, osm in enumerate(node_osm_id.tolist())}
+    banned: set[tuple[int, int]] = set()
+    for r in restrictions:
+        via = node_of.get(r.via_node)
+        if via is None:
+            continue
+        into = [e for e in by_way.get(r.from_way, []) if v[e] == via]
+        onto = {e for e in by_way.get(r.to_way, []) if u[e] == via}
+        if not into or not onto:
+            continue
+        leaving = out_edge[out_ptr[via] : out_ptr[via + 1]].tolist()
+        forbidden = [e for e in leaving if e not in onto] if r.only else sorted(onto)
+        banned.update((a, b) for a in into for b in forbidden)
+    pairs = np.array(sorted(banned), dtype=np.int32).reshape(-1, 2)
+    return pairs[:, 0].copy(), pairs[:, 1].copy()

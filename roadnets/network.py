@@ -1,0 +1,227 @@
+"""The road network object users hold: arrays, spatial index, routing, geometry, graph view."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import TYPE_CHECKING
+
+import networkx as nx
+import numpy as np
+import numpy.typing as npt
+from shapely.geometry import LineString
+
+from roadnets.drivable import ROAD_CLASSES
+from roadnets.routing import PathTable, shortest_path_table
+from roadnets.spatial import EdgeHits, build_rtree, query_edges
+
+if TYPE_CHECKING:
+    from rtree.index import Index
+
+    from roadnets.arrays import NetworkArrays
+    from roadnets.projection import Projector
+
+__all__ = ["NetworkInfo", "RoadNetwork"]
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+@dataclass(frozen=True, slots=True)
+class NetworkInfo:
+    """Summary figures of a network (what ``mapmatch network info`` prints)."""
+
+    network_id: str
+    source: str
+    crs: str
+    nodes: int
+    edges: int
+    road_km_by_class: dict[str, float]
+    oneway_share: float
+    bbox: tuple[float, float, float, float]
+    turn_restrictions: int
+    clipped_ways: int
+    from_cache: bool
+    load_s: float
+
+    @property
+    def road_km(self) -> float:
+        """Length of road, each two-way road counted once, km."""
+        return sum(self.road_km_by_class.values())
+
+
+@dataclass(eq=False)
+class RoadNetwork:
+    """
+    A compiled, routable, spatially indexed directed road network.
+
+    Build one with :func:`roadnets.load`. Metric work happens in :attr:`crs` (the UTM zone of
+    the network's centre); positions given to and returned from users are WGS84 lon/lat.
+    """
+
+    network_id: str
+    source: str
+    source_sha256: str
+    arrays: NetworkArrays
+    projector: Projector
+    way_names: dict[int, str] = field(repr=False)
+    clipped_ways: int = 0
+    from_cache: bool = False
+    load_s: float = 0.0
+
+    @property
+    def crs(self) -> str:
+        """The projected CRS of the arrays, as ``EPSG:<code>``."""
+        return self.projector.crs
+
+    @cached_property
+    def rtree(self) -> Index:
+        """R-tree over the segments of every road geometry (bulk loaded on first use)."""
+        return build_rtree(self.arrays)
+
+    def project(self, lon: FloatArray, lat: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """WGS84 lon/lat degrees to x/y metres in :attr:`crs`."""
+        return self.projector.forward(lon, lat)
+
+    def unproject(self, x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """x/y metres in :attr:`crs` to WGS84 lon/lat degrees."""
+        return self.projector.inverse(x, y)
+
+    def nearby_edges(
+        self,
+        x: FloatArray,
+        y: FloatArray,
+        radius_m: float | FloatArray,
+        *,
+        max_per_point: int | None = None,
+    ) -> EdgeHits:
+        """
+        Directed edges within ``radius_m`` of each point, projected, nearest first.
+
+        Parameters
+        ----------
+        x, y
+            Points in metres (:attr:`crs`).
+        radius_m
+            One radius, or one per point, metres.
+        max_per_point
+            Keep at most this many directed edges per point.
+        """
+        radius = np.asarray(radius_m, dtype=np.float64)
+        return query_edges(self.rtree, self.arrays, x, y, radius, max_per_point=max_per_point)
+
+    def shortest_paths(self, sources: IntArray, bounds_m: float | FloatArray) -> PathTable:
+        """Bounded shortest paths from each source node (see :func:`shortest_path_table`)."""
+        return shortest_path_table(self.arrays, sources, np.asarray(bounds_m, dtype=np.float64))
+
+    @cached_property
+    def _vertex_position(self) -> FloatArray:
+        """Each vertex's distance along the concatenation of all edges (a monotone key)."""
+        a = self.arrays
+        base = np.concatenate(([0.0], np.cumsum(a.edge_length_m + 1.0)[:-1]))
+        sizes = np.diff(a.edge_geom_ptr)
+        return a.geom_cum_m + np.repeat(base, sizes)
+
+    def point_on_edge(self, edge: IntArray, offset_m: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Positions (metres) at ``offset_m`` along each ``edge``, vectorised."""
+        a = self.arrays
+        edge = np.asarray(edge, dtype=np.int64)
+        offset = np.clip(np.asarray(offset_m, dtype=np.float64), 0.0, a.edge_length_m[edge])
+        base = self._vertex_position[a.edge_geom_ptr[edge]]
+        i = np.searchsorted(self._vertex_position, base + offset, side="right") - 1
+        i = np.clip(i, a.edge_geom_ptr[edge], a.edge_geom_ptr[edge + 1] - 2)
+        seg = a.geom_cum_m[i + 1] - a.geom_cum_m[i]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            t = np.where(seg > 0, (offset - a.geom_cum_m[i]) / seg, 0.0)
+        t = np.clip(t, 0.0, 1.0)
+        x = a.geom_x[i] + t * (a.geom_x[i + 1] - a.geom_x[i])
+        y = a.geom_y[i] + t * (a.geom_y[i + 1] - a.geom_y[i])
+        return x, y
+
+    def edge_polyline(
+        self, edge: int, start_m: float, end_m: float
+    ) -> tuple[FloatArray, FloatArray]:
+        """Vertices (metres) of ``edge`` between two offsets along it, ends interpolated."""
+        a = self.arrays
+        lo, hi = int(a.edge_geom_ptr[edge]), int(a.edge_geom_ptr[edge + 1])
+        cum = a.geom_cum_m[lo:hi]
+        inner = np.flatnonzero((cum > start_m) & (cum < end_m)) + lo
+        ends_x, ends_y = self.point_on_edge(np.array([edge, edge]), np.array([start_m, end_m]))
+        x = np.concatenate(([ends_x[0]], a.geom_x[inner], [ends_x[1]]))
+        y = np.concatenate(([ends_y[0]], a.geom_y[inner], [ends_y[1]]))
+        return x, y
+
+    def edge_osm_ids(self, edge: IntArray) -> tuple[IntArray, IntArray, IntArray]:
+        """OSM ``(u, v, key)`` of each edge (u and v are OSM node ids)."""
+        a = self.arrays
+        edge = np.asarray(edge, dtype=np.int64)
+        return a.node_osm_id[a.edge_u[edge]], a.node_osm_id[a.edge_v[edge]], a.edge_key[edge]
+
+    @cached_property
+    def bbox(self) -> tuple[float, float, float, float]:
+        """``(min_lon, min_lat, max_lon, max_lat)`` of the road geometry."""
+        a = self.arrays
+        lon, lat = self.unproject(
+            np.array([a.geom_x.min(), a.geom_x.max(), a.geom_x.min(), a.geom_x.max()]),
+            np.array([a.geom_y.min(), a.geom_y.min(), a.geom_y.max(), a.geom_y.max()]),
+        )
+        return float(lon.min()), float(lat.min()), float(lon.max()), float(lat.max())
+
+    def info(self) -> NetworkInfo:
+        """Counts, km of road by class, one-way share, bounding box."""
+        a = self.arrays
+        once = (a.edge_twin < 0) | (np.arange(a.n_edges) < a.edge_twin)
+        km = np.bincount(
+            a.edge_class[once], weights=a.edge_length_m[once], minlength=len(ROAD_CLASSES)
+        )
+        by_class = {name: round(float(k) / 1000.0, 3) for name, k in zip(ROAD_CLASSES, km) if k}
+        total = float(a.edge_length_m[once].sum())
+        oneway = float(a.edge_length_m[once & a.edge_oneway].sum())
+        return NetworkInfo(
+            network_id=self.network_id,
+            source=self.source,
+            crs=self.crs,
+            nodes=a.n_nodes,
+            edges=a.n_edges,
+            road_km_by_class=by_class,
+            oneway_share=oneway / total if total else 0.0,
+            bbox=self.bbox,
+            turn_restrictions=len(a.banned_in),
+            clipped_ways=self.clipped_ways,
+            from_cache=self.from_cache,
+            load_s=self.load_s,
+        )
+
+    @cached_property
+    def graph(self) -> nx.MultiDiGraph:  # type: ignore[type-arg]
+        """
+        The network as a networkx ``MultiDiGraph`` in osmnx's conventions.
+
+        Node ids are OSM node ids with ``x``/``y`` (metres, :attr:`crs`) and ``lon``/``lat``;
+        edges ``(u, v, key)`` carry ``osmid`` (way id), ``length`` (m), ``highway``,
+        ``oneway``, ``speed_kph``, ``name``, ``geometry`` (shapely, metres) and ``index``
+        (the edge's position in :attr:`arrays`). Built on first use.
+        """
+        a = self.arrays
+        G: nx.MultiDiGraph = nx.MultiDiGraph(crs=self.crs, name=self.network_id)  # type: ignore[type-arg]
+        lon, lat = self.unproject(a.node_x, a.node_y)
+        for i, osm in enumerate(a.node_osm_id.tolist()):
+            G.add_node(osm, x=float(a.node_x[i]), y=float(a.node_y[i]), lon=lon[i], lat=lat[i])
+        u, v, key = self.edge_osm_ids(np.arange(a.n_edges))
+        for e in range(a.n_edges):
+            lo, hi = a.edge_geom_ptr[e], a.edge_geom_ptr[e + 1]
+            way = int(a.edge_way_id[e])
+            G.add_edge(
+                int(u[e]),
+                int(v[e]),
+                key=int(key[e]),
+                index=e,
+                osmid=way,
+                length=float(a.edge_length_m[e]),
+                highway=ROAD_CLASSES[a.edge_class[e]],
+                oneway=bool(a.edge_oneway[e]),
+                speed_kph=float(a.edge_speed_mps[e] * 3.6),
+                name=self.way_names.get(way, ""),
+                geometry=LineString(np.column_stack((a.geom_x[lo:hi], a.geom_y[lo:hi]))),
+            )
+        return G

@@ -1,0 +1,148 @@
+"""R-tree over the network's segments and the vectorised nearby-edge query."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from rtree import index as rtree_index
+
+from roadnets.arrays import NetworkArrays
+
+__all__ = ["EdgeHits", "build_rtree", "query_edges"]
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+@dataclass(frozen=True, slots=True)
+class EdgeHits:
+    """
+    Directed edges near query points, sorted by point, then distance.
+
+    Attributes
+    ----------
+    point
+        Index of the query point each row belongs to.
+    edge
+        Directed edge index. Both directions of a two-way road appear as their own rows.
+    distance_m
+        Distance from the point to its projection on the edge, metres.
+    offset_m
+        Distance along the edge from its start to the projection, metres.
+    x, y
+        The projection, metres in the network CRS.
+    bearing_deg
+        Direction of travel of the edge at the projection, degrees clockwise from north.
+    """
+
+    point: IntArray
+    edge: IntArray
+    distance_m: FloatArray
+    offset_m: FloatArray
+    x: FloatArray
+    y: FloatArray
+    bearing_deg: FloatArray
+
+    def __len__(self) -> int:
+        return len(self.point)
+
+
+def build_rtree(arrays: NetworkArrays) -> rtree_index.Index:
+    """Bulk-load an in-memory R-tree with the bounding box of every indexed segment."""
+    a = arrays.seg_start
+    x0, y0 = arrays.geom_x[a], arrays.geom_y[a]
+    x1, y1 = arrays.geom_x[a + 1], arrays.geom_y[a + 1]
+    mins = np.column_stack((np.minimum(x0, x1), np.minimum(y0, y1)))
+    maxs = np.column_stack((np.maximum(x0, x1), np.maximum(y0, y1)))
+    ids = np.arange(len(a), dtype=np.int64)
+    props = rtree_index.Property()
+    props.dimension = 2
+    return rtree_index.Index((ids, mins, maxs), properties=props)
+
+
+def query_edges(
+    tree: rtree_index.Index,
+    arrays: NetworkArrays,
+    x: FloatArray,
+    y: FloatArray,
+    radius_m: FloatArray,
+    *,
+    max_per_point: int | None = None,
+) -> EdgeHits:
+    """
+    Every directed edge within a radius of each point, with its projection.
+
+    Parameters
+    ----------
+    tree
+        The R-tree from :func:`build_rtree` over ``arrays``.
+    arrays
+        The compiled network.
+    x, y
+        Query points, metres in the network CRS.
+    radius_m
+        Search radius per point (or one value broadcast to all), metres.
+    max_per_point
+        Keep only this many nearest directed edges per point.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    radius = np.broadcast_to(np.asarray(radius_m, dtype=np.float64), x.shape)
+    mins = np.column_stack((x - radius, y - radius))
+    maxs = np.column_stack((x + radius, y + radius))
+    seg, counts = tree.intersection_v(mins, maxs)
+    point = np.repeat(np.arange(len(x), dtype=np.int64), counts.astype(np.int64))
+    start = arrays.seg_start[seg]
+    ax, ay = arrays.geom_x[start], arrays.geom_y[start]
+    dx, dy = arrays.geom_x[start + 1] - ax, arrays.geom_y[start + 1] - ay
+    px, py = x[point], y[point]
+    seg_len2 = dx * dx + dy * dy
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.where(seg_len2 > 0, ((px - ax) * dx + (py - ay) * dy) / seg_len2, 0.0)
+    t = np.clip(t, 0.0, 1.0)
+    qx, qy = ax + t * dx, ay + t * dy
+    dist = np.hypot(px - qx, py - qy)
+    near = dist <= radius[point]
+    point, seg, dist, t, qx, qy = point[near], seg[near], dist[near], t[near], qx[near], qy[near]
+    dx, dy, start, seg_len2 = dx[near], dy[near], start[near], seg_len2[near]
+    edge = arrays.seg_edge[seg].astype(np.int64)
+
+    # the nearest segment of each (point, edge) pair
+    order = np.lexsort((dist, edge, point))
+    point, edge = point[order], edge[order]
+    first = np.ones(len(point), dtype=bool)
+    first[1:] = (point[1:] != point[:-1]) | (edge[1:] != edge[:-1])
+    keep = order[first]
+    point, edge = point[first], edge[first]
+    dist, qx, qy = dist[keep], qx[keep], qy[keep]
+    offset = arrays.geom_cum_m[start[keep]] + t[keep] * np.sqrt(seg_len2[keep])
+    bearing = np.degrees(np.arctan2(dx[keep], dy[keep])) % 360.0
+
+    twin = arrays.edge_twin[edge].astype(np.int64)
+    has_twin = twin >= 0
+    point = np.concatenate((point, point[has_twin]))
+    edge = np.concatenate((edge, twin[has_twin]))
+    dist = np.concatenate((dist, dist[has_twin]))
+    length = arrays.edge_length_m[twin[has_twin]]
+    offset = np.concatenate((offset, length - offset[has_twin]))
+    qx = np.concatenate((qx, qx[has_twin]))
+    qy = np.concatenate((qy, qy[has_twin]))
+    bearing = np.concatenate((bearing, (bearing[has_twin] + 180.0) % 360.0))
+
+    order = np.lexsort((edge, dist, point))
+    if max_per_point is not None:
+        sorted_point = point[order]
+        group_start = np.searchsorted(sorted_point, sorted_point, side="left")
+        rank = np.arange(len(order)) - group_start
+        order = order[rank < max_per_point]
+    return EdgeHits(
+        point=point[order],
+        edge=edge[order],
+        distance_m=dist[order],
+        offset_m=np.clip(offset[order], 0.0, arrays.edge_length_m[edge[order]]),
+        x=qx[order],
+        y=qy[order],
+        bearing_deg=bearing[order],
+    )
