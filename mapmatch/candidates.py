@@ -1,0 +1,94 @@
+"""Candidate road positions for every fix of a trace, in one vectorised R-tree query."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from roadnets import RoadNetwork
+
+    from mapmatch.config import MatchConfig
+
+__all__ = ["Candidates", "find_candidates", "search_radii"]
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+@dataclass(frozen=True, slots=True)
+class Candidates:
+    """
+    Candidate positions of all fixes, ragged: fix ``t`` owns rows ``ptr[t]:ptr[t + 1]``.
+
+    Rows of one fix are sorted nearest first. ``edge`` is a directed edge index, ``offset_m``
+    the distance along it, ``x``/``y`` the projection (metres), ``distance_m`` the distance
+    from the fix and ``bearing_deg`` the road's direction there (clockwise from north).
+    """
+
+    ptr: IntArray
+    edge: IntArray
+    offset_m: FloatArray
+    distance_m: FloatArray
+    x: FloatArray
+    y: FloatArray
+    bearing_deg: FloatArray
+
+    @property
+    def counts(self) -> IntArray:
+        """Number of candidates of each fix."""
+        return np.diff(self.ptr)
+
+    def __len__(self) -> int:
+        return len(self.edge)
+
+
+def search_radii(accuracy_m: FloatArray | None, n: int, config: MatchConfig) -> FloatArray:
+    """
+    Search radius of each fix: the configured one, widened for fixes with a poor accuracy.
+
+    Examples
+    --------
+    >>> from mapmatch.config import MatchConfig
+    >>> search_radii(np.array([3.0, 20.0, np.nan, 500.0]), 4, MatchConfig())
+    array([ 50.,  80.,  50., 200.])
+    """
+    radius = np.full(n, config.search_radius_m)
+    if accuracy_m is not None:
+        wide = np.nan_to_num(accuracy_m, nan=0.0) * config.radius_accuracy_factor
+        radius = np.minimum(np.maximum(radius, wide), config.max_search_radius_m)
+    return radius
+
+
+def find_candidates(
+    net: RoadNetwork, x: FloatArray, y: FloatArray, radius_m: FloatArray, config: MatchConfig
+) -> Candidates:
+    """
+    The ``max_candidates`` nearest directed edges within each fix's radius.
+
+    Parameters
+    ----------
+    net
+        The road network.
+    x, y
+        Fix positions, metres in the network CRS.
+    radius_m
+        Search radius of each fix, metres.
+    config
+        Matcher parameters (``max_candidates``).
+    """
+    hits = net.nearby_edges(x, y, radius_m, max_per_point=config.max_candidates)
+    counts = np.bincount(hits.point, minlength=len(x))
+    ptr = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
+    return Candidates(
+        ptr=ptr,
+        edge=hits.edge,
+        offset_m=hits.offset_m,
+        distance_m=hits.distance_m,
+        x=hits.x,
+        y=hits.y,
+        bearing_deg=hits.bearing_deg,
+    )

@@ -1,0 +1,127 @@
+"""The trip-distance cross-check: fused distance against the matched road length."""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import asdict, dataclass
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ["DistanceCheck", "check_distance", "chord_length_m"]
+
+FloatArray = npt.NDArray[np.float64]
+Verdict = Literal["pass", "over", "under", "incomplete"]
+Source = Literal["odometer", "caller", "chord"]
+
+_log = logging.getLogger("mapmatch")
+
+
+@dataclass(frozen=True, slots=True)
+class DistanceCheck:
+    """
+    The fused trip distance held against the matched road distance.
+
+    Attributes
+    ----------
+    matched_length_m
+        Road distance along the matched path, metres.
+    fused_length_m
+        Trip distance the vehicle reported, metres.
+    source
+        Where the fused distance came from: the ``odometer`` column (last - first), a
+        distance the ``caller`` gave, or the ``chord`` sum of the raw positions (which
+        undercounts curves at low sampling rates).
+    relative_error
+        ``(fused - matched) / matched``; NaN when the matched length is 0.
+    band
+        The pass band ``(low, high)`` of relative errors.
+    verdict
+        ``pass`` inside the band, ``over``/``under`` outside it, ``incomplete`` when breaks
+        or unmatched fixes leave part of the road distance unknown.
+    """
+
+    matched_length_m: float
+    fused_length_m: float
+    source: Source
+    relative_error: float
+    band: tuple[float, float]
+    verdict: Verdict
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON-ready members (NaN becomes ``None``)."""
+        out: dict[str, object] = asdict(self)
+        out["band"] = list(self.band)
+        if math.isnan(self.relative_error):
+            out["relative_error"] = None
+        return out
+
+
+def chord_length_m(x: FloatArray, y: FloatArray) -> float:
+    """
+    Sum of straight-line distances between consecutive positions, metres.
+
+    Examples
+    --------
+    >>> chord_length_m(np.array([0.0, 3.0, 3.0]), np.array([0.0, 4.0, 8.0]))
+    9.0
+    """
+    return float(np.hypot(np.diff(x), np.diff(y)).sum())
+
+
+def check_distance(
+    *,
+    trace_id: str,
+    matched_length_m: float,
+    complete: bool,
+    band: tuple[float, float],
+    odometer_m: FloatArray | None,
+    fused_distance_m: float | None,
+    chord_m: float,
+) -> DistanceCheck:
+    """
+    Compare the fused trip distance with the matched length and give a verdict.
+
+    The fused distance is, in order of preference, the odometer's last minus first known
+    value, the caller's ``fused_distance_m``, or the chord sum. A verdict other than
+    ``pass`` is also logged as a warning, so a suspect meter never goes unseen.
+
+    Examples
+    --------
+    >>> c = check_distance(trace_id="t", matched_length_m=1000.0, complete=True,
+    ...                    band=(-0.04, 0.01), odometer_m=np.array([0.0, 1020.0]),
+    ...                    fused_distance_m=None, chord_m=990.0)
+    >>> c.source, round(c.relative_error, 3), c.verdict
+    ('odometer', 0.02, 'over')
+    """
+    source: Source
+    known = odometer_m[np.isfinite(odometer_m)] if odometer_m is not None else np.empty(0)
+    if len(known) >= 2:
+        fused, source = float(known[-1] - known[0]), "odometer"
+    elif fused_distance_m is not None:
+        fused, source = float(fused_distance_m), "caller"
+    else:
+        fused, source = chord_m, "chord"
+    relative = (fused - matched_length_m) / matched_length_m if matched_length_m > 0 else math.nan
+    verdict: Verdict
+    if not complete or math.isnan(relative):
+        verdict = "incomplete"
+    elif relative > band[1]:
+        verdict = "over"
+    elif relative < band[0]:
+        verdict = "under"
+    else:
+        verdict = "pass"
+    if verdict != "pass":
+        _log.warning(
+            "trace %r: fused distance %.1f m (%s) vs matched %.1f m: relative error %s, %s",
+            trace_id,
+            fused,
+            source,
+            matched_length_m,
+            "n/a" if math.isnan(relative) else f"{relative:+.2%}",
+            verdict,
+        )
+    return DistanceCheck(matched_length_m, fused, source, relative, band, verdict)

@@ -1,0 +1,238 @@
+"""The HMM's scores: log emission of each candidate, log transition of each candidate pair.
+
+Everything is vectorised over all candidates (or all candidate pairs) of a whole trace.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from roadnets import PathTable, RoadNetwork
+
+    from mapmatch.candidates import Candidates
+    from mapmatch.config import MatchConfig
+
+__all__ = [
+    "ROUTE_VIA_GRAPH",
+    "ROUTE_SAME_EDGE",
+    "ROUTE_UTURN",
+    "CandidatePairs",
+    "candidate_pairs",
+    "heading_weight",
+    "log_emission",
+    "log_heading",
+    "log_transition",
+    "route_search_bounds",
+    "routes_between",
+    "uturn_routes",
+]
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+#: How a transition's route runs: along one edge, through the graph, or a U-turn mid-road.
+ROUTE_SAME_EDGE, ROUTE_VIA_GRAPH, ROUTE_UTURN = 0, 1, 2
+
+
+def log_emission(distance_m: FloatArray, *, sigma_m: FloatArray | float) -> FloatArray:
+    """
+    Log-likelihood of seeing each fix ``distance_m`` away from its candidate.
+
+    Gaussian position error. The normalising constant is dropped because it is the same for
+    every candidate of one fix.
+
+    Parameters
+    ----------
+    distance_m
+        Distance from each fix to its candidate road position, in metres.
+    sigma_m
+        Standard deviation of the position error, in metres (one value or one per candidate).
+
+    Examples
+    --------
+    >>> log_emission(np.array([5.0, 10.0]), sigma_m=5.0)
+    array([-0.5, -2. ])
+    """
+    return -0.5 * (distance_m / sigma_m) ** 2
+
+
+def heading_weight(speed_mps: FloatArray, config: MatchConfig) -> FloatArray:
+    """
+    How much the heading counts at each speed: 0 when (nearly) stopped, 1 at road speeds.
+
+    Examples
+    --------
+    >>> from mapmatch.config import MatchConfig
+    >>> heading_weight(np.array([0.0, 5.5, 20.0, np.nan]), MatchConfig())
+    array([0. , 0.5, 1. , 0. ])
+    """
+    lo, hi = config.heading_min_speed_mps, config.heading_full_speed_mps
+    weight = np.clip((speed_mps - lo) / (hi - lo), 0.0, 1.0)
+    return np.nan_to_num(weight, nan=0.0)
+
+
+def log_heading(
+    heading_deg: FloatArray, bearing_deg: FloatArray, weight: FloatArray, config: MatchConfig
+) -> FloatArray:
+    """
+    Log-likelihood of the reported heading given the road direction at the candidate.
+
+    A Gaussian on the angle between them (``heading_sigma_deg``), scaled by the speed weight
+    and floored at ``-heading_max_penalty``. Unknown headings (NaN) score 0.
+
+    Examples
+    --------
+    >>> from mapmatch.config import MatchConfig
+    >>> log_heading(np.array([90.0, 90.0]), np.array([90.0, 270.0]), np.ones(2), MatchConfig())
+    array([ -0., -12.])
+    """
+    diff = np.abs((heading_deg - bearing_deg + 180.0) % 360.0 - 180.0)
+    score = np.maximum(-0.5 * (diff / config.heading_sigma_deg) ** 2, -config.heading_max_penalty)
+    return np.nan_to_num(weight * score, nan=0.0)
+
+
+@dataclass(frozen=True, slots=True)
+class CandidatePairs:
+    """
+    Every pair of candidates of consecutive fixes.
+
+    ``step[i]`` is the fix ``t`` the pair leaves from; ``a[i]``/``b[i]`` are candidate rows of
+    fix ``t`` and ``t + 1``; ``a_rank``/``b_rank`` their rank within their fix.
+    """
+
+    step: IntArray
+    a: IntArray
+    b: IntArray
+    a_rank: IntArray
+    b_rank: IntArray
+
+
+def candidate_pairs(ptr: IntArray) -> CandidatePairs:
+    """
+    All candidate pairs of consecutive fixes, vectorised.
+
+    Examples
+    --------
+    >>> pairs = candidate_pairs(np.array([0, 2, 3, 5]))
+    >>> pairs.a.tolist(), pairs.b.tolist()
+    ([0, 1, 2, 2], [2, 2, 3, 4])
+    """
+    counts = np.diff(ptr)
+    n_from, n_to = counts[:-1], counts[1:]
+    per_step = n_from * n_to
+    step = np.repeat(np.arange(len(per_step), dtype=np.int64), per_step)
+    first = np.concatenate(([0], np.cumsum(per_step)[:-1]))
+    k = np.arange(int(per_step.sum()), dtype=np.int64) - first[step]
+    width = n_to[step]
+    a_rank, b_rank = k // width, k % width
+    return CandidatePairs(step, ptr[step] + a_rank, ptr[step + 1] + b_rank, a_rank, b_rank)
+
+
+def route_search_bounds(great_circle_m: FloatArray, config: MatchConfig) -> FloatArray:
+    """Longest route worth searching after each fix: ``route_factor * gc + route_slack_m``."""
+    return config.route_factor * great_circle_m + config.route_slack_m
+
+
+def routes_between(
+    net: RoadNetwork,
+    cands: Candidates,
+    pairs: CandidatePairs,
+    table: PathTable,
+    config: MatchConfig,
+) -> tuple[FloatArray, FloatArray, IntArray]:
+    """
+    Route distance, free-flow time and route kind of every candidate pair.
+
+    The route runs along the directed graph from candidate ``a``'s position to ``b``'s:
+    forward along one edge when both are on it (a move back by at most ``standstill_m`` is
+    noise around a stopped car and counts as 0 m); otherwise to the end of ``a``'s edge,
+    through the graph to the start of ``b``'s edge, and along it. When ``b`` is on the
+    reverse twin of ``a``'s edge, a U-turn in place is an alternative scored separately
+    (:func:`uturn_routes`). Unreachable pairs get ``inf``.
+
+    Returns
+    -------
+    route_m, time_s, kind
+        Metres along the road, seconds at the roads' speed limits, and
+        :data:`ROUTE_SAME_EDGE` or :data:`ROUTE_VIA_GRAPH`.
+    """
+    arrays = net.arrays
+    ea, eb = cands.edge[pairs.a], cands.edge[pairs.b]
+    oa, ob = cands.offset_m[pairs.a], cands.offset_m[pairs.b]
+    len_a = arrays.edge_length_m[ea]
+    speed_a, speed_b = arrays.edge_speed_mps[ea], arrays.edge_speed_mps[eb]
+
+    mid_m, mid_s = table.lookup(arrays.edge_v[ea], arrays.edge_u[eb])
+    route = (len_a - oa) + mid_m + ob
+    time = (len_a - oa) / speed_a + mid_s + ob / speed_b
+    kind = np.full(len(ea), ROUTE_VIA_GRAPH, dtype=np.int64)
+
+    same = (ea == eb) & (ob >= oa - config.standstill_m)
+    along = np.maximum(ob - oa, 0.0)
+    use_same = same & (along <= route)
+    route = np.where(use_same, along, route)
+    time = np.where(use_same, along / speed_a, time)
+    kind[use_same] = ROUTE_SAME_EDGE
+
+    return route, time, kind
+
+
+def uturn_routes(net: RoadNetwork, cands: Candidates, pairs: CandidatePairs) -> FloatArray:
+    """
+    Length of a U-turn in the middle of the road for pairs on twin edges, else ``inf``.
+
+    The car on ``a`` at offset ``oa`` turns around onto ``b`` (the same road the other way,
+    where that spot is at ``len - oa``) and drives on to ``ob``.
+
+    Examples
+    --------
+    >>> # a 100 m two-way road: 30 m along one way, then 80 m along the other = 10 m back
+    >>> float(np.abs(30.0 + 80.0 - 100.0))
+    10.0
+    """
+    arrays = net.arrays
+    ea, eb = cands.edge[pairs.a], cands.edge[pairs.b]
+    oa, ob = cands.offset_m[pairs.a], cands.offset_m[pairs.b]
+    u_route = np.abs(oa + ob - arrays.edge_length_m[ea])
+    return np.where(eb == arrays.edge_twin[ea], u_route, np.inf)
+
+
+def log_transition(
+    great_circle_m: FloatArray,
+    route_m: FloatArray,
+    time_s: FloatArray,
+    kind: IntArray,
+    dt_s: FloatArray,
+    sigma_m: FloatArray,
+    config: MatchConfig,
+) -> FloatArray:
+    """
+    Log-likelihood of moving between two candidates of consecutive fixes.
+
+    ``-|great-circle - route| / beta`` with ``beta = beta_m + beta_per_s * dt`` (Newson &
+    Krumm's exponential, widened for long intervals), minus a speed-plausibility penalty when
+    the route needs a speed well above the roads' limits, minus ``uturn_penalty`` for a
+    U-turn in the middle of a road. Unreachable pairs (``route = inf``) are ``-inf``.
+
+    Examples
+    --------
+    >>> from mapmatch.config import MatchConfig
+    >>> log_transition(np.array([10.0]), np.array([13.0]), np.array([1.0]),
+    ...                np.array([1]), np.array([1.0]), np.array([5.0]), MatchConfig())
+    array([-0.92307692])
+    """
+    beta = config.beta_m + config.beta_per_s * dt_s
+    with np.errstate(invalid="ignore"):
+        score = -np.abs(great_circle_m - route_m) / beta
+        needed = np.maximum(route_m - 2.0 * sigma_m, 0.0) / dt_s
+        limit = np.where(time_s > 0, route_m / time_s, np.inf)
+        allowed = config.speed_factor * limit + config.speed_margin_mps
+        excess = np.maximum(needed - allowed, 0.0)
+    score = score - 0.5 * (np.nan_to_num(excess, nan=0.0) / config.speed_sigma_mps) ** 2
+    score = np.where(kind == ROUTE_UTURN, score - config.uturn_penalty, score)
+    return np.where(np.isfinite(route_m), score, -np.inf)

@@ -1,0 +1,199 @@
+"""Most likely candidate sequence (Viterbi) and per-fix posteriors (forward-backward).
+
+Works on padded trellises: ``log_emission[t, k]`` for candidate ``k`` of fix ``t`` (``-inf``
+for padding or a fix with no candidate) and ``log_transition[t, j, k]`` from candidate ``j``
+of fix ``t`` to candidate ``k`` of fix ``t + 1``. Where no candidate of a fix can be reached
+from the previous fix, the sequence is split there (a *break*) and the next piece starts
+afresh. The loops run compiled (numba); numpy only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from numba import njit
+
+__all__ = ["ViterbiResult", "posteriors", "viterbi"]
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+@dataclass(frozen=True, slots=True)
+class ViterbiResult:
+    """
+    The best state sequence.
+
+    Attributes
+    ----------
+    states
+        Chosen candidate of each fix, or -1 for a fix with no candidate.
+    pieces
+        ``(start, stop)`` fix ranges matched as one connected piece, in order.
+    log_likelihood
+        Sum over pieces of the best path's log-likelihood.
+    """
+
+    states: IntArray
+    pieces: list[tuple[int, int]]
+    log_likelihood: float
+
+    @property
+    def breaks(self) -> list[int]:
+        """First fix of every piece but the first: where the trace was split."""
+        return [start for start, _ in self.pieces[1:]]
+
+
+@njit(cache=True, nogil=True)
+def _viterbi_kernel(em, tr):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    n_steps, width = em.shape
+    delta = np.full((n_steps, width), -np.inf)
+    back = np.full((n_steps, width), -1, dtype=np.int64)
+    for k in range(width):
+        delta[0, k] = em[0, k]
+    for t in range(1, n_steps):
+        alive = False
+        for k in range(width):
+            if em[t, k] == -np.inf:
+                continue
+            best = -np.inf
+            arg = -1
+            for j in range(width):
+                value = delta[t - 1, j] + tr[t - 1, j, k]
+                if value > best:
+                    best = value
+                    arg = j
+            if arg >= 0:
+                delta[t, k] = best + em[t, k]
+                back[t, k] = arg
+                alive = True
+        if not alive:
+            for k in range(width):
+                delta[t, k] = em[t, k]
+                back[t, k] = -1
+    states = np.full(n_steps, -1, dtype=np.int64)
+    starts = np.zeros(n_steps, dtype=np.bool_)
+    total = 0.0
+    t = n_steps - 1
+    while t >= 0:
+        best = -np.inf
+        arg = -1
+        for k in range(width):
+            if delta[t, k] > best:
+                best = delta[t, k]
+                arg = k
+        if arg < 0:
+            t -= 1
+            continue
+        total += best
+        k = arg
+        states[t] = k
+        while back[t, k] >= 0:
+            k = back[t, k]
+            t -= 1
+            states[t] = k
+        starts[t] = True
+        t -= 1
+    return states, starts, total
+
+
+@njit(cache=True, nogil=True)
+def _logsumexp(values):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    top = -np.inf
+    for v in values:
+        if v > top:
+            top = v
+    if top == -np.inf:
+        return -np.inf
+    acc = 0.0
+    for v in values:
+        acc += np.exp(v - top)
+    return top + np.log(acc)
+
+
+@njit(cache=True, nogil=True)
+def _posterior_kernel(em, tr, starts, stops):  # type: ignore[no-untyped-def]  # pragma: no cover
+    n_steps, width = em.shape
+    post = np.zeros((n_steps, width))
+    alpha = np.full((n_steps, width), -np.inf)
+    beta = np.full((n_steps, width), -np.inf)
+    work = np.empty(width)
+    for p in range(len(starts)):
+        s, e = starts[p], stops[p]
+        for k in range(width):
+            alpha[s, k] = em[s, k]
+        for t in range(s + 1, e):
+            for k in range(width):
+                if em[t, k] == -np.inf:
+                    alpha[t, k] = -np.inf
+                    continue
+                for j in range(width):
+                    work[j] = alpha[t - 1, j] + tr[t - 1, j, k]
+                alpha[t, k] = _logsumexp(work) + em[t, k]
+        for k in range(width):
+            beta[e - 1, k] = 0.0
+        for t in range(e - 2, s - 1, -1):
+            for j in range(width):
+                for k in range(width):
+                    work[k] = tr[t, j, k] + em[t + 1, k] + beta[t + 1, k]
+                beta[t, j] = _logsumexp(work)
+        z = _logsumexp(alpha[e - 1])
+        for t in range(s, e):
+            for k in range(width):
+                v = alpha[t, k] + beta[t, k] - z
+                post[t, k] = np.exp(v) if v > -np.inf else 0.0
+    return post
+
+
+def viterbi(log_emission: FloatArray, log_transition: FloatArray) -> ViterbiResult:
+    """
+    Most likely candidate sequence of a padded trellis, split where no transition is possible.
+
+    Parameters
+    ----------
+    log_emission
+        ``(T, K)`` log emission of candidate ``k`` at fix ``t``; ``-inf`` pads.
+    log_transition
+        ``(T - 1, K, K)`` log transition from candidate ``j`` at ``t`` to ``k`` at ``t + 1``.
+
+    Examples
+    --------
+    >>> em = np.log(np.array([[0.6, 0.4], [0.5, 0.5]]))
+    >>> tr = np.log(np.array([[[0.1, 0.9], [0.9, 0.1]]]))
+    >>> viterbi(em, tr).states.tolist()
+    [0, 1]
+    """
+    em = np.ascontiguousarray(log_emission, dtype=np.float64)
+    tr = np.ascontiguousarray(log_transition, dtype=np.float64)
+    if em.shape[0] == 0:
+        return ViterbiResult(np.empty(0, dtype=np.int64), [], 0.0)
+    states, starts, total = _viterbi_kernel(em, tr)
+    pieces: list[tuple[int, int]] = []
+    matched = states >= 0
+    begin = np.flatnonzero(starts & matched)
+    for start in begin.tolist():
+        stop = start + 1
+        while stop < len(states) and matched[stop] and not starts[stop]:
+            stop += 1
+        pieces.append((start, stop))
+    return ViterbiResult(states, pieces, float(total))
+
+
+def posteriors(
+    log_emission: FloatArray, log_transition: FloatArray, pieces: list[tuple[int, int]]
+) -> FloatArray:
+    """
+    Posterior probability of every candidate given its whole piece (forward-backward).
+
+    Returns
+    -------
+    FloatArray
+        ``(T, K)``; rows of fixes outside every piece are 0.
+    """
+    em = np.ascontiguousarray(log_emission, dtype=np.float64)
+    tr = np.ascontiguousarray(log_transition, dtype=np.float64)
+    starts = np.array([p[0] for p in pieces], dtype=np.int64)
+    stops = np.array([p[1] for p in pieces], dtype=np.int64)
+    return np.asarray(_posterior_kernel(em, tr, starts, stops), dtype=np.float64)
