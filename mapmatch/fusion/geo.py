@@ -36,7 +36,7 @@ class LocalTangentPlane:
     >>> ltp = LocalTangentPlane(116.4, 39.9)
     >>> x, y = ltp.to_xy(116.401, 39.901)
     >>> print(f"{float(x):.2f} {float(y):.2f}")
-    85.40 111.04
+    85.52 111.03
     >>> lon, lat = ltp.to_lonlat(x, y)
     >>> print(f"{float(lon):.6f} {float(lat):.6f}")
     116.401000 39.901000
