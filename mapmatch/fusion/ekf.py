@@ -12,7 +12,8 @@ pseudo-measurement. Each sensor epoch ``k``:
 
 1. Stopped (odometer at zero for ``zupt_window_s``): speed is updated to zero (ZUPT), the gyro
    reading is a direct measurement of its bias (zero angular rate update), heading and position
-   are not propagated and gain no process noise: no heading drift at red lights.
+   are not propagated and gain no process noise, and updates made while standing correct only
+   their own states (GNSS: position; gyro: bias): no heading drift at red lights.
 2. Moving: speed random walk; odometer update ``z = so * v``; pose propagated with the midpoint
    heading over the interval (exact on circular arcs) with the full Jacobian.
 3. GNSS position update, chi-square gated; receiver speed/course update when fast enough.
@@ -143,9 +144,20 @@ def _inv(s: FloatArray) -> FloatArray:
 
 
 def _update(
-    x: FloatArray, p: FloatArray, nu: FloatArray, h: FloatArray, r: FloatArray, gate: float
+    x: FloatArray,
+    p: FloatArray,
+    nu: FloatArray,
+    h: FloatArray,
+    r: FloatArray,
+    gate: float,
+    mask: FloatArray,
 ) -> tuple[bool, float]:
-    """EKF measurement update in place; returns (accepted, normalised innovation squared)."""
+    """
+    EKF measurement update in place; returns (accepted, normalised innovation squared).
+
+    ``mask`` (0/1 per state) zeroes gain rows: states outside it are not corrected (a
+    "consider" update). The Joseph form keeps the covariance right for such a gain.
+    """
     n = x.shape[0]
     m = nu.shape[0]
     pht = _mmt(p, h)
@@ -160,6 +172,7 @@ def _update(
     k = _mm(pht, si)
     for i in range(n):
         for j in range(m):
+            k[i, j] *= mask[i]
             x[i] += k[i, j] * nu[j]
     a = np.eye(n) - _mm(k, h)
     p_new = _mmt(_mm(a, p), a) + _mmt(_mm(k, r), k)
@@ -218,6 +231,14 @@ def _kernel(
     r3 = np.zeros((3, 3))
     nu3 = np.zeros(3)
     f = np.eye(ns)
+    m_all = np.ones(ns)
+    m_pos = np.zeros(ns)  # standing still: fixes correct position only ...
+    m_pos[0] = 1.0
+    m_pos[1] = 1.0
+    m_speed = np.zeros(ns)
+    m_speed[3] = 1.0
+    m_bias = np.zeros(ns)  # ... and the gyro reading only its bias: heading is held
+    m_bias[4] = 1.0
     for i in range(ns):
         states[i0, i] = x[i]
         pdiag[i0, i] = p[i, i]
@@ -238,12 +259,12 @@ def _kernel(
             h1[0, 3] = 1.0
             nu1[0] = -x[3]
             r1[0, 0] = prm[_R_ZUPT]
-            _update(x, p, nu1, h1, r1, 0.0)
+            _update(x, p, nu1, h1, r1, 0.0, m_speed)
             h1[0, 3] = 0.0
             h1[0, 4] = 1.0
             nu1[0] = gyro[k] - x[4]
             r1[0, 0] = prm[_Q_YAW] / dt  # per-sample variance of the gyro white noise
-            _update(x, p, nu1, h1, r1, 0.0)
+            _update(x, p, nu1, h1, r1, 0.0, m_bias)
         else:
             p[3, 3] += prm[_Q_SPEED] * dt
             h1[0, :] = 0.0
@@ -251,7 +272,7 @@ def _kernel(
             h1[0, 5] = x[3]
             nu1[0] = odo[k] - x[5] * x[3]
             r1[0, 0] = prm[_R_ODO]
-            _update(x, p, nu1, h1, r1, 0.0)
+            _update(x, p, nu1, h1, r1, 0.0, m_all)
             g = gyro[k]
             sc = 1.0 + x[6]
             rate = g - x[4]
@@ -307,7 +328,7 @@ def _kernel(
                 p[0, 0] += nu2[0] * nu2[0]
                 p[1, 1] += nu2[1] * nu2[1]
                 gate = 0.0
-            ok, _ = _update(x, p, nu2, h2, r2, gate)
+            ok, _ = _update(x, p, nu2, h2, r2, gate, m_pos if stopped[k] else m_all)
             if ok:
                 status[k] = FIX_USED
                 rejects = 0
@@ -323,7 +344,7 @@ def _kernel(
                     nu2[1] = _wrap(gyaw[k] - x[2])
                     r2[0, 0] = sv * sv
                     r2[1, 1] = sc_yaw * sc_yaw
-                    _update(x, p, nu2, h2, r2, prm[_CHI2_VEL])
+                    _update(x, p, nu2, h2, r2, prm[_CHI2_VEL], m_all)
             else:
                 status[k] = FIX_REJECTED
                 rejects += 1
@@ -345,7 +366,7 @@ def _kernel(
             r3[0, 1] = (a2 - c2) * cy * sy
             r3[1, 0] = r3[0, 1]
             r3[2, 2] = prm[_SIG_ROAD_YAW] * prm[_SIG_ROAD_YAW]
-            ok, _ = _update(x, p, nu3, h3, r3, prm[_CHI2_ROAD])
+            ok, _ = _update(x, p, nu3, h3, r3, prm[_CHI2_ROAD], m_all)
             fb_used[k] = ok
         for i in range(ns):
             states[k, i] = x[i]

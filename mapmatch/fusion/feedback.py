@@ -82,7 +82,7 @@ class RoadFeedback:
                 i = int(bad[0])
                 raise RawLogError(
                     _SOURCE,
-                    f"entry {i}: field {name!r} is not finite ({arr[i]!r})",
+                    f"entry {i}: field {name!r} is not finite ({float(arr[i])!r})",
                     "drop unmatched points before building RoadFeedback",
                 )
         for name, arr in zip(names[4:], arrays[4:], strict=True):
@@ -91,7 +91,7 @@ class RoadFeedback:
                 i = int(bad[0])
                 raise RawLogError(
                     _SOURCE,
-                    f"entry {i}: {name} must be > 0 (got {arr[i]!r})",
+                    f"entry {i}: {name} must be > 0 (got {float(arr[i])!r})",
                     "give realistic 1-sigma errors in metres",
                 )
         t, lon_a, lat_a, hd, al, cr = (a.copy() for a in arrays)

@@ -206,7 +206,7 @@ class RawLog:
             raise RawLogError(
                 source,
                 f"time is not strictly increasing at row {i} (field {cols['time']!r}: "
-                f"{time_s[i - 1]!r} then {time_s[i]!r})",
+                f"{float(time_s[i - 1])!r} then {float(time_s[i])!r})",
                 "sort the log by time and drop duplicate epochs",
             )
         gyro = _numeric(df, cols["gyro_z_dps"], source, required=True)
@@ -221,7 +221,7 @@ class RawLog:
             i = int(half[0])
             raise RawLogError(
                 source,
-                f"row {i} has only half a fix (lat={lat[i]!r}, lon={lon[i]!r})",
+                f"row {i} has only half a fix (lat={float(lat[i])!r}, lon={float(lon[i])!r})",
                 "give both lat and lon or leave both empty",
             )
         fix = np.isfinite(lat)
@@ -232,7 +232,8 @@ class RawLog:
             i = int(out[0])
             raise RawLogError(
                 source,
-                f"row {i} has coordinates out of range (lat={lat[i]!r}, lon={lon[i]!r})",
+                f"row {i} has coordinates out of range "
+                f"(lat={float(lat[i])!r}, lon={float(lon[i])!r})",
                 "lat must be in [-90, 90] and lon in [-180, 180]; swapped columns?",
             )
         hdop = _optional(df, cols, "hdop", source, n)
@@ -243,7 +244,7 @@ class RawLog:
                 i = int(neg[0])
                 raise RawLogError(
                     source,
-                    f"row {i} has a negative {name} ({arr[i]!r})",
+                    f"row {i} has a negative {name} ({float(arr[i])!r})",
                     f"{name} must be >= 0; leave it empty when unknown",
                 )
         g_speed = _optional(df, cols, "gnss_speed_mps", source, n)
@@ -291,25 +292,28 @@ def _resolve_columns(df: pd.DataFrame, source: str) -> dict[str, str]:
 
 def _parse_time(col: pd.Series, source: str, name: str) -> FloatArray:
     numeric = pd.to_numeric(col, errors="coerce")
-    if numeric.notna().all():
+    parsed = pd.to_datetime(col.astype(str), errors="coerce", utc=True, format="ISO8601")
+    is_num = numeric.notna().to_numpy()
+    is_iso = parsed.notna().to_numpy() & ~is_num
+    bad = np.flatnonzero(~(is_num | is_iso))
+    if bad.size or (is_num.any() and is_iso.any()):
+        i = int(bad[0]) if bad.size else int(np.flatnonzero(is_iso)[0])
+        raise RawLogError(
+            source,
+            f"row {i}: field {name!r} value {col.iloc[i]!r} is not a time"
+            + ("" if bad.size else " of the same kind as row 0"),
+            "use ISO-8601 (2024-05-01T08:00:00.1Z) or epoch seconds, the same on every row",
+        )
+    if is_num.all():
         t = numeric.to_numpy(dtype=np.float64)
     else:
-        parsed = pd.to_datetime(col, errors="coerce", utc=True, format="ISO8601")
-        bad = np.flatnonzero(parsed.isna().to_numpy())
-        if bad.size:
-            i = int(bad[0])
-            raise RawLogError(
-                source,
-                f"row {i}: field {name!r} value {col.iloc[i]!r} is not a time",
-                "use ISO-8601 (2024-05-01T08:00:00.1Z) or epoch seconds",
-            )
         ns = parsed.dt.tz_convert("UTC").dt.tz_localize(None).to_numpy(dtype="datetime64[ns]")
         t = ns.astype(np.int64).astype(np.float64) / 1e9
     bad_t = np.flatnonzero(~np.isfinite(t))
     if bad_t.size:
         i = int(bad_t[0])
         raise RawLogError(
-            source, f"row {i}: field {name!r} is not finite ({t[i]!r})", "fill in every time"
+            source, f"row {i}: field {name!r} is not finite ({float(t[i])!r})", "fill in every time"
         )
     return t
 
@@ -329,7 +333,7 @@ def _numeric(df: pd.DataFrame, name: str, source: str, *, required: bool) -> Flo
             i = int(bad[0])
             raise RawLogError(
                 source,
-                f"row {i}: field {name!r} is empty or not finite ({values[i]!r})",
+                f"row {i}: field {name!r} is empty or not finite ({float(values[i])!r})",
                 "every sensor row needs odometer and gyro values; interpolate short gaps",
             )
     return values.copy()
@@ -358,7 +362,7 @@ def _speed_from_counts(
         raise RawLogError(
             source,
             f"odometer count goes backwards at row {i} (field {name!r}: "
-            f"{counts[i - 1]!r} then {counts[i]!r})",
+            f"{float(counts[i - 1])!r} then {float(counts[i])!r})",
             "odo_count must be cumulative; unwrap counter roll-overs before fusing",
         )
     speed = np.zeros_like(counts)
