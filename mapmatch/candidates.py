@@ -45,6 +45,29 @@ class Candidates:
     def __len__(self) -> int:
         return len(self.edge)
 
+    def subset(self, fixes: IntArray) -> Candidates:
+        """
+        The candidates of some fixes only, in the order given.
+
+        Examples
+        --------
+        >>> c = Candidates(np.array([0, 2, 3, 5]), *(np.arange(5.0),) * 6)
+        >>> c.subset(np.array([0, 2])).edge.tolist()
+        [0.0, 1.0, 3.0, 4.0]
+        """
+        counts = self.counts[fixes]
+        ptr = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
+        rows = np.repeat(self.ptr[fixes] - ptr[:-1], counts) + np.arange(int(ptr[-1]))
+        return Candidates(
+            ptr=ptr,
+            edge=self.edge[rows],
+            offset_m=self.offset_m[rows],
+            distance_m=self.distance_m[rows],
+            x=self.x[rows],
+            y=self.y[rows],
+            bearing_deg=self.bearing_deg[rows],
+        )
+
 
 def search_radii(accuracy_m: FloatArray | None, n: int, config: MatchConfig) -> FloatArray:
     """

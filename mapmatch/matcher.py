@@ -1,25 +1,28 @@
 """``mapmatch.match``: a trace and a road network in, the roads driven out.
 
-The stages, each vectorised over the whole trace: project the fixes, find candidates (one
-R-tree query), score emissions, build every candidate pair of consecutive fixes, route them
-(one bounded many-source Dijkstra), score transitions, run Viterbi and forward-backward on
-the padded trellis, and assemble segments.
+The stages, each vectorised over the whole trace: project the fixes and find their candidates
+(one R-tree query), leave out outliers and the near-duplicate fixes of a stopped car, score
+emissions, build every candidate pair of consecutive fixes, route them (one bounded
+many-source Dijkstra), score transitions, run Viterbi and forward-backward on the padded
+trellis, try to join pieces by leaving out the fix at a break, and assemble segments. Fixes
+left out of the model get their position on the matched path interpolated by time.
 """
 
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
+from mapmatch.assemble import assemble
 from mapmatch.candidates import Candidates, find_candidates, search_radii
 from mapmatch.config import MatchConfig
 from mapmatch.distance import check_distance, chord_length_m
 from mapmatch.errors import NoCandidatesError
 from mapmatch.models import (
-    ROUTE_SAME_EDGE,
     ROUTE_UTURN,
     candidate_pairs,
     heading_weight,
@@ -30,7 +33,8 @@ from mapmatch.models import (
     routes_between,
     uturn_routes,
 )
-from mapmatch.result import MatchedEdge, MatchedPoints, MatchResult, MatchStats, Segment
+from mapmatch.result import MatchResult, MatchStats
+from mapmatch.selection import find_outliers, thin_fixes
 from mapmatch.viterbi import posteriors, viterbi
 
 if TYPE_CHECKING:
@@ -42,6 +46,45 @@ __all__ = ["match"]
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
+
+
+@dataclass(frozen=True, slots=True)
+class Fixes:
+    """A trace's fixes in metres with the per-fix model inputs."""
+
+    x: FloatArray
+    y: FloatArray
+    time_s: FloatArray
+    sigma_m: FloatArray
+    speed_mps: FloatArray
+    heading_deg: FloatArray | None
+    odometer_m: FloatArray | None
+    reported_speed_mps: FloatArray | None
+
+
+@dataclass(frozen=True, slots=True)
+class Solution:
+    """
+    The HMM solved over a subset of fixes (``used``, indices into the trace).
+
+    ``states`` is the chosen candidate rank of each used fix (-1: none); ``pieces`` are
+    ``(start, stop)`` ranges of *used* positions; ``kinds`` the route kind of every padded
+    transition; ``table`` the shortest paths the transitions were routed on.
+    """
+
+    used: IntArray
+    cands: Candidates
+    states: IntArray
+    pieces: list[tuple[int, int]]
+    post: FloatArray
+    kinds: IntArray
+    table: PathTable
+
+    @property
+    def breaks(self) -> list[int]:
+        """Used positions where a new piece starts."""
+        return [start for start, _ in self.pieces[1:]]
 
 
 def match(
@@ -86,58 +129,42 @@ def match(
     cands = find_candidates(net, x, y, radius, config)
     if len(cands) == 0:
         raise NoCandidatesError(trace.trace_id, float(radius.max()))
-    clock = _lap(timings, "candidates", clock)
-
     sigma = np.full(n, config.sigma_m)
     if trace.accuracy_m is not None:
         sigma = np.fmax(sigma, trace.accuracy_m)
-    step_m = np.hypot(np.diff(x), np.diff(y))
     dt = np.diff(trace.time_s)
-    speed = trace.speed_mps if trace.speed_mps is not None else _speed_from_positions(step_m, dt)
-    point_of = np.repeat(np.arange(n), cands.counts)
-    em = log_emission(cands.distance_m, sigma_m=sigma[point_of])
-    if trace.heading_deg is not None:
-        weight = heading_weight(speed, config)
-        em += log_heading(
-            trace.heading_deg[point_of], cands.bearing_deg, weight[point_of], config
-        )
-    clock = _lap(timings, "emission", clock)
-
-    pairs = candidate_pairs(cands.ptr)
-    bounds = route_search_bounds(step_m, config)
-    leaving = point_of < n - 1
-    table = net.shortest_paths(
-        net.arrays.edge_v[cands.edge[leaving]], bounds[point_of[leaving]]
+    speed = trace.speed_mps
+    if speed is None:
+        speed = _speed_from_positions(np.hypot(np.diff(x), np.diff(y)), dt)
+    fixes = Fixes(
+        x, y, trace.time_s, sigma, speed, trace.heading_deg, trace.odometer_m, trace.speed_mps
     )
-    route, free_time, kind = routes_between(net, cands, pairs, table, config)
-    gc, step_dt = step_m[pairs.step], dt[pairs.step]
-    step_sigma = np.maximum(sigma[pairs.step], sigma[pairs.step + 1])
-    lt = log_transition(gc, route, free_time, kind, step_dt, step_sigma, config)
-    u_route = uturn_routes(net, cands, pairs)
-    u_kind = np.full(len(kind), ROUTE_UTURN)
-    u_time = u_route / net.arrays.edge_speed_mps[cands.edge[pairs.a]]
-    lu = log_transition(gc, u_route, u_time, u_kind, step_dt, step_sigma, config)
-    use_u = lu > lt
-    lt = np.where(use_u, lu, lt)
-    kind = np.where(use_u, ROUTE_UTURN, kind)
-    clock = _lap(timings, "routing", clock)
+    clock = _lap(timings, "candidates", clock)
 
-    width = int(cands.counts.max())
-    em_pad = np.full((n, width), -np.inf)
-    em_pad[point_of, np.arange(len(cands)) - cands.ptr[point_of]] = em
-    tr_pad = np.full((max(n - 1, 0), width, width), -np.inf)
-    tr_pad[pairs.step, pairs.a_rank, pairs.b_rank] = lt
-    kind_pad = np.full(tr_pad.shape, -1, dtype=np.int64)
-    kind_pad[pairs.step, pairs.a_rank, pairs.b_rank] = kind
-    best = viterbi(em_pad, tr_pad)
-    post = posteriors(em_pad, tr_pad, best.pieces)
-    clock = _lap(timings, "viterbi", clock)
+    has_cands = cands.counts > 0
+    outlier = find_outliers(x, y, trace.time_s, sigma, config) & has_cands
+    lonely = _isolated(~has_cands)
+    keep = thin_fixes(x, y, sigma, has_cands & ~outlier, config)
+    used = np.flatnonzero(keep)
+    # a stretch of fixes with no road nearby (not a lone stray fix) splits the trace
+    missing_before = np.cumsum(~has_cands & ~lonely)
+    cut_after = missing_before[used[1:]] > missing_before[used[:-1]]
+    clock = _lap(timings, "selection", clock)
 
-    rows = np.where(best.states >= 0, cands.ptr[:-1] + best.states, -1)
-    segments = _assemble_segments(net, cands, rows, best.states, best.pieces, kind_pad, table)
-    points = _matched_points(net, trace, cands, rows, best.states, post, best.pieces)
-    matched_length = float(sum(s.length_m for s in segments))
-    complete = len(best.pieces) == 1 and bool(points.matched.all())
+    solution = _solve(net, fixes, cands, used, cut_after, config)
+    repairs = 0
+    while solution.breaks and repairs < config.max_break_repairs:
+        repaired = _repair_one_break(net, fixes, cands, solution, cut_after, config)
+        repairs += 1
+        if repaired is None:
+            break
+        solution, cut_after = repaired
+    clock = _lap(timings, "hmm", clock)
+
+    assembled = assemble(net, trace, fixes.x, fixes.y, solution, outlier)
+    matched_length = float(sum(s.length_m for s in assembled.segments))
+    points = assembled.points
+    complete = len(assembled.segments) == 1 and bool(points.matched[[0, -1]].all())
     check = check_distance(
         trace_id=trace.trace_id,
         matched_length_m=matched_length,
@@ -157,13 +184,16 @@ def match(
         duplicate_time_rows=len(trace.report.duplicate_time_rows),
         timings_s=timings,
         warnings=tuple(trace.report.warnings),
+        model_points=len(solution.used),
+        outliers=int(points.outlier.sum()),
+        break_repairs=repairs,
     )
     return MatchResult(
         trace_id=trace.trace_id,
         network={"id": net.network_id, "source": net.source, "crs": net.crs},
-        segments=segments,
+        segments=assembled.segments,
         points=points,
-        breaks=best.breaks,
+        breaks=[s.first for s in assembled.segments[1:]],
         matched_length_m=matched_length,
         distance_check=check,
         stats=stats,
@@ -180,114 +210,115 @@ def _speed_from_positions(step_m: FloatArray, dt_s: FloatArray) -> FloatArray:
     """Speed at each fix from the distance to its neighbours (when the trace has none)."""
     v = step_m / dt_s
     padded = np.concatenate(([v[0]], v, [v[-1]]))
-    return 0.5 * (padded[:-1] + padded[1:])
+    return np.asarray(0.5 * (padded[:-1] + padded[1:]), dtype=np.float64)
 
 
-def _assemble_segments(
+def _isolated(flag: BoolArray) -> BoolArray:
+    """Flagged entries whose neighbours are both unflagged (a lone stray fix)."""
+    padded = np.concatenate(([False], flag, [False]))
+    return np.asarray(flag & ~padded[:-2] & ~padded[2:], dtype=bool)
+
+
+def _solve(
     net: RoadNetwork,
-    cands: Candidates,
-    rows: IntArray,
-    states: IntArray,
-    pieces: list[tuple[int, int]],
-    kind_pad: IntArray,
-    table: PathTable,
-) -> list[Segment]:
-    """Edges driven between consecutive chosen candidates of each piece, and geometry."""
-    arrays = net.arrays
-    edge_len = arrays.edge_length_m
-    segments: list[Segment] = []
-    for index, (start, stop) in enumerate(pieces):
-        first = rows[start]
-        # each entry: [edge, start offset, end offset]
-        entries: list[list[float]] = [
-            [int(cands.edge[first]), cands.offset_m[first], cands.offset_m[first]]
-        ]
-        for t in range(start, stop - 1):
-            ra, rb = rows[t], rows[t + 1]
-            ea, eb = int(cands.edge[ra]), int(cands.edge[rb])
-            ob = float(cands.offset_m[rb])
-            move = kind_pad[t, states[t], states[t + 1]]
-            current = entries[-1]
-            if move == ROUTE_SAME_EDGE:
-                current[2] = max(current[2], ob)
-            elif move == ROUTE_UTURN:
-                turn = max(current[2], edge_len[ea] - ob)
-                current[2] = turn
-                entries.append([eb, edge_len[ea] - turn, ob])
-            else:
-                current[2] = edge_len[ea]
-                for e in table.edges(int(arrays.edge_v[ea]), int(arrays.edge_u[eb]), arrays.edge_u):
-                    entries.append([e, 0.0, edge_len[e]])
-                entries.append([eb, 0.0, ob])
-        segments.append(_segment(net, index, start, stop - 1, entries))
-    return segments
+    fixes: Fixes,
+    all_cands: Candidates,
+    used: IntArray,
+    cut_after: BoolArray,
+    config: MatchConfig,
+) -> Solution:
+    """Score the trellis over the ``used`` fixes and find the best sequence."""
+    cands = all_cands.subset(used)
+    n = len(used)
+    point_of = np.repeat(np.arange(n), cands.counts)
+    fix_of = used[point_of]
+    em = log_emission(cands.distance_m, sigma_m=fixes.sigma_m[fix_of])
+    if fixes.heading_deg is not None:
+        weight = heading_weight(fixes.speed_mps, config)
+        em += log_heading(fixes.heading_deg[fix_of], cands.bearing_deg, weight[fix_of], config)
+
+    x, y = fixes.x[used], fixes.y[used]
+    step_m = np.hypot(np.diff(x), np.diff(y))
+    dt = np.diff(fixes.time_s[used])
+    pairs = candidate_pairs(cands.ptr)
+    bounds = route_search_bounds(step_m, config)
+    leaving = point_of < n - 1
+    table = net.shortest_paths(net.arrays.edge_v[cands.edge[leaving]], bounds[point_of[leaving]])
+    route, free_time, kind = routes_between(net, cands, pairs, table, config)
+    gc, step_dt = step_m[pairs.step], dt[pairs.step]
+    sigma = fixes.sigma_m[used]
+    step_sigma = np.maximum(sigma[pairs.step], sigma[pairs.step + 1])
+    travel = _travel_between(fixes, used, config)
+    step_travel = None if travel is None else (travel[0][pairs.step], travel[1][pairs.step])
+    lt = log_transition(gc, route, free_time, kind, step_dt, step_sigma, config, step_travel)
+    u_route = uturn_routes(net, cands, pairs)
+    u_time = u_route / net.arrays.edge_speed_mps[cands.edge[pairs.a]]
+    u_kind = np.full(len(kind), ROUTE_UTURN)
+    lu = log_transition(gc, u_route, u_time, u_kind, step_dt, step_sigma, config, step_travel)
+    use_u = lu > lt
+    lt = np.where(use_u, lu, lt)
+    kind = np.where(use_u, ROUTE_UTURN, kind)
+    lt[cut_after[pairs.step]] = -np.inf
+
+    width = max(int(cands.counts.max()) if n else 1, 1)
+    em_pad = np.full((n, width), -np.inf)
+    em_pad[point_of, np.arange(len(cands)) - cands.ptr[point_of]] = em
+    tr_pad = np.full((max(n - 1, 0), width, width), -np.inf)
+    tr_pad[pairs.step, pairs.a_rank, pairs.b_rank] = lt
+    kinds = np.full(tr_pad.shape, -1, dtype=np.int64)
+    kinds[pairs.step, pairs.a_rank, pairs.b_rank] = kind
+    best = viterbi(em_pad, tr_pad)
+    post = posteriors(em_pad, tr_pad, best.pieces)
+    return Solution(used, cands, best.states, best.pieces, post, kinds, table)
 
 
-def _segment(
-    net: RoadNetwork, index: int, first: int, last: int, entries: list[list[float]]
-) -> Segment:
-    arrays = net.arrays
-    edge_ids = np.array([int(e[0]) for e in entries], dtype=np.int64)
-    u, v, key = net.edge_osm_ids(edge_ids)
-    edges: list[MatchedEdge] = []
-    xs: list[FloatArray] = []
-    ys: list[FloatArray] = []
-    for i, (edge, lo, hi) in enumerate(entries):
-        e = int(edge)
-        edges.append(
-            MatchedEdge(
-                edge=e,
-                u=int(u[i]),
-                v=int(v[i]),
-                key=int(key[i]),
-                osm_way_ids=(int(arrays.edge_way_id[e]),),
-                length_m=float(arrays.edge_length_m[e]),
-                start_offset_m=float(lo),
-                end_offset_m=float(hi),
-            )
-        )
-        px, py = net.edge_polyline(e, float(lo), float(hi))
-        if xs:
-            px, py = px[1:], py[1:]
-        xs.append(px)
-        ys.append(py)
-    lon, lat = net.unproject(np.concatenate(xs), np.concatenate(ys))
-    return Segment(index=index, first=first, last=last, edges=edges, lon=lon, lat=lat)
+def _travel_between(
+    fixes: Fixes, used: IntArray, config: MatchConfig
+) -> tuple[FloatArray, FloatArray] | None:
+    """
+    Distance the trace says the car travelled between consecutive used fixes, and the extra
+    tolerance it deserves: odometer increments where both ends have one (no extra), else the
+    mean reported speed times dt (``travel_tolerance_mps * dt`` extra, as the speed may
+    change in between); NaN where neither is known; ``None`` when the trace has neither
+    column or ``use_travel`` is off.
+    """
+    if not config.use_travel or (fixes.odometer_m is None and fixes.reported_speed_mps is None):
+        return None
+    dt = np.diff(fixes.time_s[used])
+    travel = np.full(len(used) - 1, np.nan)
+    slack = np.zeros(len(used) - 1)
+    if fixes.reported_speed_mps is not None:
+        v = fixes.reported_speed_mps[used]
+        travel = 0.5 * (v[:-1] + v[1:]) * dt
+        slack = config.travel_tolerance_mps * dt  # speed may change between the fixes
+    if fixes.odometer_m is not None:
+        odo = np.diff(fixes.odometer_m[used])
+        exact = np.isfinite(odo) & (odo >= 0)
+        travel = np.where(exact, odo, travel)
+        slack = np.where(exact, 0.0, slack)
+    return travel, slack
 
 
-def _matched_points(
+def _repair_one_break(
     net: RoadNetwork,
-    trace: Trace,
+    fixes: Fixes,
     cands: Candidates,
-    rows: IntArray,
-    states: IntArray,
-    post: FloatArray,
-    pieces: list[tuple[int, int]],
-) -> MatchedPoints:
-    n = len(rows)
-    matched = rows >= 0
-    safe = np.where(matched, rows, 0)
-    edge = np.where(matched, cands.edge[safe], -1)
-    u, v, key = net.edge_osm_ids(np.where(matched, edge, 0))
-    lon, lat = net.unproject(cands.x[safe], cands.y[safe])
-    nan = np.full(n, np.nan)
-    confidence = np.where(matched, post[np.arange(n), np.maximum(states, 0)], 0.0)
-    segment = np.full(n, -1, dtype=np.int64)
-    for index, (start, stop) in enumerate(pieces):
-        segment[start:stop] = index
-    return MatchedPoints(
-        time_s=trace.time_s,
-        raw_lon=trace.lon,
-        raw_lat=trace.lat,
-        matched=matched,
-        edge=edge,
-        u=np.where(matched, u, -1),
-        v=np.where(matched, v, -1),
-        key=np.where(matched, key, -1).astype(np.int64),
-        offset_m=np.where(matched, cands.offset_m[safe], nan),
-        distance_m=np.where(matched, cands.distance_m[safe], nan),
-        lon=np.where(matched, lon, nan),
-        lat=np.where(matched, lat, nan),
-        confidence=np.clip(confidence, 0.0, 1.0),
-        segment=segment,
-    )
+    solution: Solution,
+    cut_after: BoolArray,
+    config: MatchConfig,
+) -> tuple[Solution, BoolArray] | None:
+    """Leave out the fix at (or just before) a break if that joins the pieces."""
+    used = solution.used
+    for start in solution.breaks:
+        if cut_after[start - 1]:
+            continue  # a stretch without roads: a real break
+        for drop in (start, start - 1):
+            if drop <= 0 or drop >= len(used) - 1:
+                continue
+            trial_used = np.delete(used, drop)
+            trial_cut = np.delete(cut_after, min(drop, len(cut_after) - 1))
+            trial_cut[drop - 1] = cut_after[drop - 1] or cut_after[min(drop, len(cut_after) - 1)]
+            trial = _solve(net, fixes, cands, trial_used, trial_cut, config)
+            if len(trial.breaks) < len(solution.breaks):
+                return trial, trial_cut
+    return None

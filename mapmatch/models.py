@@ -210,6 +210,7 @@ def log_transition(
     dt_s: FloatArray,
     sigma_m: FloatArray,
     config: MatchConfig,
+    travel: tuple[FloatArray, FloatArray] | None = None,
 ) -> FloatArray:
     """
     Log-likelihood of moving between two candidates of consecutive fixes.
@@ -217,7 +218,13 @@ def log_transition(
     ``-|great-circle - route| / beta`` with ``beta = beta_m + beta_per_s * dt`` (Newson &
     Krumm's exponential, widened for long intervals), minus a speed-plausibility penalty when
     the route needs a speed well above the roads' limits, minus ``uturn_penalty`` for a
-    U-turn in the middle of a road. Unreachable pairs (``route = inf``) are ``-inf``.
+    U-turn in the middle of a road. When the trace says how far the car travelled between the
+    fixes (``travel``: the distance, odometer increments or mean reported speed times ``dt``,
+    NaN where unknown, and an extra slack for the latter), a route that differs from it by
+    more than the tolerance (``travel_tolerance_m + travel_tolerance_frac * travel + slack``)
+    costs the excess over ``travel_beta_m``. Inside the tolerance the term is flat, so the
+    fused distance never pulls the matched length and the distance check stays independent.
+    Unreachable pairs (``route = inf``) are ``-inf``.
 
     Examples
     --------
@@ -226,7 +233,7 @@ def log_transition(
     ...                np.array([1]), np.array([1.0]), np.array([5.0]), MatchConfig())
     array([-0.92307692])
     """
-    beta = config.beta_m + config.beta_per_s * dt_s
+    beta = config.beta_m + config.beta_per_s * dt_s + config.beta_per_sigma * sigma_m
     with np.errstate(invalid="ignore"):
         score = -np.abs(great_circle_m - route_m) / beta
         needed = np.maximum(route_m - 2.0 * sigma_m, 0.0) / dt_s
@@ -234,5 +241,11 @@ def log_transition(
         allowed = config.speed_factor * limit + config.speed_margin_mps
         excess = np.maximum(needed - allowed, 0.0)
     score = score - 0.5 * (np.nan_to_num(excess, nan=0.0) / config.speed_sigma_mps) ** 2
+    if travel is not None:
+        travel_m, slack_m = travel
+        tolerance = config.travel_tolerance_m + config.travel_tolerance_frac * travel_m + slack_m
+        with np.errstate(invalid="ignore", over="ignore"):
+            off = np.maximum(np.abs(route_m - travel_m) - tolerance, 0.0)
+        score = score - np.nan_to_num(off, nan=0.0) / config.travel_beta_m
     score = np.where(kind == ROUTE_UTURN, score - config.uturn_penalty, score)
     return np.where(np.isfinite(route_m), score, -np.inf)

@@ -86,6 +86,8 @@ class MatchedPoints:
 
     Unmatched fixes have ``matched`` False, ``edge``/``u``/``v``/``key`` -1 and NaN
     positions; ``confidence`` is the posterior probability of the chosen candidate.
+    ``interpolated`` marks fixes left out of the model (outliers, a stopped car's repeats)
+    whose position was interpolated along the path; ``outlier`` those judged outliers.
     """
 
     time_s: FloatArray
@@ -102,6 +104,8 @@ class MatchedPoints:
     lat: FloatArray
     confidence: FloatArray
     segment: IntArray
+    interpolated: BoolArray
+    outlier: BoolArray
 
 
 @dataclass(frozen=True, slots=True)
@@ -115,6 +119,9 @@ class MatchStats:
     duplicate_time_rows: int
     timings_s: dict[str, float]
     warnings: tuple[str, ...]
+    model_points: int
+    outliers: int
+    break_repairs: int
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary."""
@@ -124,6 +131,9 @@ class MatchStats:
             "candidates": self.candidates,
             "reordered_rows": self.reordered_rows,
             "duplicate_time_rows": self.duplicate_time_rows,
+            "model_points": self.model_points,
+            "outliers": self.outliers,
+            "break_repairs": self.break_repairs,
             "timings_s": {k: round(v, 6) for k, v in self.timings_s.items()},
             "warnings": list(self.warnings),
         }
@@ -222,6 +232,8 @@ class MatchResult:
                         "offset_m": _finite(p.offset_m[i]),
                         "distance_m": _finite(p.distance_m[i]),
                         "confidence": round(float(p.confidence[i]), 4),
+                        "interpolated": bool(p.interpolated[i]),
+                        "outlier": bool(p.outlier[i]),
                     },
                 }
             )
@@ -258,6 +270,8 @@ class MatchResult:
                 "offset_m": p.offset_m,
                 "distance_m": p.distance_m,
                 "confidence": p.confidence,
+                "interpolated": p.interpolated,
+                "outlier": p.outlier,
             }
         )
 

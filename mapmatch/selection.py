@@ -1,0 +1,87 @@
+"""Which fixes enter the HMM: outliers and near-duplicates of a stopped car are left out."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from mapmatch.config import MatchConfig
+
+__all__ = ["find_outliers", "thin_fixes"]
+
+FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+
+
+def find_outliers(
+    x: FloatArray, y: FloatArray, time_s: FloatArray, sigma_m: FloatArray, config: MatchConfig
+) -> BoolArray:
+    """
+    Fixes far from where their neighbours put them.
+
+    For each fix with neighbours at most ``outlier_max_gap_s`` away on both sides, the
+    position interpolated in time between the neighbours is the prediction; a fix farther
+    than ``outlier_sigmas`` x its sigma from it, and worse predicted than both neighbours, is
+    an outlier. Over a few seconds a car moves nearly straight, so a good fix stays within
+    about 1.2 sigma of the prediction. A run of
+    displaced fixes is not caught here (its members predict each other); the matcher's break
+    repair handles those.
+
+    Examples
+    --------
+    >>> from mapmatch.config import MatchConfig
+    >>> x = np.array([0.0, 10.0, 60.0, 30.0, 40.0])
+    >>> find_outliers(x, np.zeros(5), np.arange(5.0), np.full(5, 5.0), MatchConfig()).tolist()
+    [False, False, True, False, False]
+    """
+    n = len(x)
+    out = np.zeros(n, dtype=bool)
+    if n < 3 or config.outlier_sigmas <= 0:
+        return out
+    dt_before, dt_after = time_s[1:-1] - time_s[:-2], time_s[2:] - time_s[1:-1]
+    w = dt_before / (dt_before + dt_after)
+    px = x[:-2] + w * (x[2:] - x[:-2])
+    py = y[:-2] + w * (y[2:] - y[:-2])
+    residual = np.hypot(x[1:-1] - px, y[1:-1] - py)
+    close = (dt_before <= config.outlier_max_gap_s) & (dt_after <= config.outlier_max_gap_s)
+    limit = config.outlier_sigmas * sigma_m[1:-1]
+    # a good fix next to an outlier is predicted badly too; blame only the local worst
+    padded = np.concatenate(([0.0], residual, [0.0]))
+    worst = (residual >= padded[:-2]) & (residual >= padded[2:])
+    out[1:-1] = close & (residual > limit) & worst
+    return out
+
+
+def thin_fixes(
+    x: FloatArray, y: FloatArray, sigma_m: FloatArray, usable: BoolArray, config: MatchConfig
+) -> BoolArray:
+    """
+    Usable fixes to keep: each at least ``thinning_sigmas`` x sigma from the last kept one.
+
+    The first and last usable fixes are always kept.
+
+    Examples
+    --------
+    >>> from mapmatch.config import MatchConfig
+    >>> x = np.array([0.0, 3.0, 6.0, 20.0, 22.0])
+    >>> keep = thin_fixes(x, np.zeros(5), np.full(5, 5.0), np.ones(5, bool), MatchConfig())
+    >>> keep.tolist()
+    [True, False, False, True, True]
+    """
+    keep = usable.copy()
+    if config.thinning_sigmas <= 0:
+        return keep
+    index = np.flatnonzero(usable)
+    if len(index) <= 2:
+        return keep
+    radius = config.thinning_sigmas * sigma_m
+    last = index[0]
+    for i in index[1:-1].tolist():
+        if np.hypot(x[i] - x[last], y[i] - y[last]) < radius[i]:
+            keep[i] = False
+        else:
+            last = i
+    return keep
