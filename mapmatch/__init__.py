@@ -20,12 +20,13 @@ from mapmatch.errors import (
     TraceFileError,
 )
 from mapmatch.matcher import match
-from mapmatch.result import MatchedEdge, MatchedPoints, MatchResult, MatchStats, Segment
+from mapmatch.result import Diagnostics, MatchedEdge, MatchedPoints, MatchResult, MatchStats, Segment
 from mapmatch.trace import Trace, TraceReport, read_traces
 
 __all__ = [
     "OVERRIDABLE",
     "ConfigError",
+    "Diagnostics",
     "DistanceCheck",
     "InvalidTraceError",
     "MapMatchError",

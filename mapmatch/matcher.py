@@ -33,7 +33,7 @@ from mapmatch.models import (
     routes_between,
     uturn_routes,
 )
-from mapmatch.result import MatchResult, MatchStats
+from mapmatch.result import Diagnostics, MatchResult, MatchStats
 from mapmatch.selection import find_outliers, thin_fixes
 from mapmatch.viterbi import posteriors, viterbi
 
@@ -80,6 +80,8 @@ class Solution:
     post: FloatArray
     kinds: IntArray
     table: PathTable
+    log_emission: FloatArray
+    log_transition: FloatArray
 
     @property
     def breaks(self) -> list[int]:
@@ -93,6 +95,7 @@ def match(
     config: MatchConfig | None = None,
     *,
     fused_distance_m: float | None = None,
+    diagnostics: bool = False,
 ) -> MatchResult:
     """
     Match a trace onto a road network.
@@ -108,6 +111,8 @@ def match(
     fused_distance_m
         Trip distance the vehicle reported, used by the distance check when the trace has
         no odometer column.
+    diagnostics
+        Also return every candidate with its scores (``result.diagnostics``), for inspection.
 
     Returns
     -------
@@ -197,6 +202,41 @@ def match(
         matched_length_m=matched_length,
         distance_check=check,
         stats=stats,
+        diagnostics=_diagnostics(net, solution) if diagnostics else None,
+    )
+
+
+def _diagnostics(net: RoadNetwork, solution: Solution) -> Diagnostics:
+    """Every candidate of the model fixes with its scores."""
+    cands, states = solution.cands, solution.states
+    n = len(solution.used)
+    point_of = np.repeat(np.arange(n), cands.counts)
+    rank = np.arange(len(cands)) - cands.ptr[point_of]
+    chosen = states[point_of] == rank
+    prev = np.maximum(point_of - 1, 0)
+    starts = np.zeros(n, dtype=bool)
+    for start, _ in solution.pieces:
+        starts[start] = True
+    from_state = np.maximum(states[prev], 0)
+    incoming = np.full(len(cands), np.nan)
+    inner = (point_of > 0) & ~starts[point_of] & (states[prev] >= 0)
+    incoming[inner] = solution.log_transition[prev[inner], from_state[inner], rank[inner]]
+    u, v, key = net.edge_osm_ids(cands.edge)
+    lon, lat = net.unproject(cands.x, cands.y)
+    return Diagnostics(
+        model_fixes=solution.used,
+        fix=solution.used[point_of],
+        edge=cands.edge,
+        u=u,
+        v=v,
+        key=key.astype(np.int64),
+        lon=lon,
+        lat=lat,
+        distance_m=cands.distance_m,
+        log_emission=solution.log_emission[point_of, rank],
+        log_transition=incoming,
+        posterior=solution.post[point_of, rank],
+        chosen=chosen,
     )
 
 
@@ -269,7 +309,7 @@ def _solve(
     kinds[pairs.step, pairs.a_rank, pairs.b_rank] = kind
     best = viterbi(em_pad, tr_pad)
     post = posteriors(em_pad, tr_pad, best.pieces)
-    return Solution(used, cands, best.states, best.pieces, post, kinds, table)
+    return Solution(used, cands, best.states, best.pieces, post, kinds, table, em_pad, tr_pad)
 
 
 def _travel_between(

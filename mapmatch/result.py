@@ -14,7 +14,7 @@ if TYPE_CHECKING:
 
     from mapmatch.distance import DistanceCheck
 
-__all__ = ["MatchResult", "MatchStats", "MatchedEdge", "MatchedPoints", "Segment"]
+__all__ = ["Diagnostics", "MatchResult", "MatchStats", "MatchedEdge", "MatchedPoints", "Segment"]
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -139,6 +139,45 @@ class MatchStats:
         }
 
 
+@dataclass(frozen=True, slots=True)
+class Diagnostics:
+    """
+    The model's inside view, for inspecting a match (``match(..., diagnostics=True)``).
+
+    One entry per candidate of every fix that entered the model: ``fix`` (trace index),
+    ``edge`` (network edge index), ``u``/``v``/``key`` (OSM), ``lon``/``lat`` (projection),
+    ``distance_m``, ``log_emission``, ``log_transition`` (from the previous model fix's chosen
+    candidate; NaN at the first fix of a segment), ``posterior`` and ``chosen``.
+    ``model_fixes`` lists the trace indices that entered the model.
+    """
+
+    model_fixes: IntArray
+    fix: IntArray
+    edge: IntArray
+    u: IntArray
+    v: IntArray
+    key: IntArray
+    lon: FloatArray
+    lat: FloatArray
+    distance_m: FloatArray
+    log_emission: FloatArray
+    log_transition: FloatArray
+    posterior: FloatArray
+    chosen: BoolArray
+
+    @property
+    def candidates(self) -> pd.DataFrame:
+        """The candidates as a table, one row each."""
+        import pandas as pd
+
+        names = ("fix", "edge", "u", "v", "key", "lon", "lat", "distance_m", "log_emission")
+        columns = {name: getattr(self, name) for name in names}
+        columns.update(
+            log_transition=self.log_transition, posterior=self.posterior, chosen=self.chosen
+        )
+        return pd.DataFrame(columns)
+
+
 @dataclass(frozen=True)
 class MatchResult:
     """
@@ -163,6 +202,8 @@ class MatchResult:
         The fused trip distance against :attr:`matched_length_m`.
     stats
         Counts and timings.
+    diagnostics
+        The model's candidates and scores when asked for (``match(..., diagnostics=True)``).
     """
 
     trace_id: str
@@ -173,6 +214,7 @@ class MatchResult:
     matched_length_m: float
     distance_check: DistanceCheck
     stats: MatchStats
+    diagnostics: Diagnostics | None = None
 
     def way_ids(self) -> list[int]:
         """OSM way ids driven, in order, consecutive repeats collapsed."""
