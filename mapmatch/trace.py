@@ -774,7 +774,11 @@ class _Checker:
 
 
 def _fmt(value: object) -> str:
+    if value is None or value is pd.NA or value is pd.NaT:
+        return "missing"
     if isinstance(value, float | np.floating):
+        if np.isnan(value):
+            return "missing"
         return f"{float(value):g}"
     return repr(value)
 

@@ -1,0 +1,445 @@
+from __future__ import annotations
+
+import math
+import pickle
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from mapmatch import chinacrs
+from mapmatch.errors import (
+    InvalidTraceError,
+    MapMatchError,
+    NoCandidatesError,
+    TraceFileError,
+)
+from mapmatch.trace import UERE_M, Trace, TraceReport
+
+LON = [7.4200, 7.4201, 7.4202, 7.4203]
+LAT = [43.7300, 43.7301, 43.7302, 43.7303]
+
+
+def make(**kwargs: object) -> Trace:
+    base: dict[str, object] = {"time": [0, 1, 2, 3], "lon": LON, "lat": LAT}
+    base.update(kwargs)
+    return Trace(**base)  # type: ignore[arg-type]
+
+
+# ------------------------------------------------------------------ errors
+
+
+def test_errors_subclass_the_root_and_valueerror() -> None:
+    for cls in (InvalidTraceError, TraceFileError, NoCandidatesError):
+        assert issubclass(cls, MapMatchError)
+        assert issubclass(cls, ValueError)
+
+
+def test_no_candidates_error_message_and_pickle() -> None:
+    err = NoCandidatesError("bus-3", 50.0)
+    assert str(err) == "trace 'bus-3': no road within 50 m of any fix; swapped lon/lat?"
+    back = pickle.loads(pickle.dumps(err))
+    assert (back.trace_id, back.radius_m, str(back)) == ("bus-3", 50.0, str(err))
+
+
+# ------------------------------------------------------------------ basics
+
+
+def test_clean_trace_has_float_arrays_and_empty_report() -> None:
+    tr = make(trace_id="t1")
+    assert tr.trace_id == "t1"
+    assert len(tr) == 4
+    assert tr.time_s.dtype == np.float64
+    assert tr.lon.tolist() == LON
+    assert tr.lat.tolist() == LAT
+    assert (tr.heading_deg, tr.speed_mps, tr.accuracy_m, tr.odometer_m) == (None,) * 4
+    assert tr.report == TraceReport(
+        input_rows=4, reordered_rows=0, duplicate_time_rows=(), warnings=()
+    )
+
+
+def test_arrays_are_read_only() -> None:
+    tr = make()
+    with pytest.raises(ValueError, match="read-only"):
+        tr.lat[0] = 0.0
+
+
+def test_iso_epoch_datetime64_and_timestamps_agree() -> None:
+    epoch = [1714550400, 1714550401.5, 1714550403]
+    iso_utc = ["2024-05-01T08:00:00Z", "2024-05-01T08:00:01.5Z", "2024-05-01T08:00:03+00:00"]
+    iso_naive = ["2024-05-01T08:00:00", "2024-05-01T08:00:01.500", "2024-05-01 08:00:03"]
+    iso_zoned = [
+        "2024-05-01T10:00:00+02:00",
+        "2024-05-01T03:00:01.5-05:00",
+        "2024-05-01T08:00:03Z",
+    ]
+    dt64 = np.array(
+        ["2024-05-01T08:00:00", "2024-05-01T08:00:01.5", "2024-05-01T08:00:03"],
+        dtype="datetime64[ms]",
+    )
+    stamps = [pd.Timestamp(s) for s in iso_zoned]
+    lon, lat = LON[:3], LAT[:3]
+    for time in (
+        epoch,
+        iso_utc,
+        iso_naive,
+        iso_zoned,
+        dt64,
+        stamps,
+        pd.Series(epoch, index=[7, 8, 9]),
+    ):
+        tr = Trace(time=time, lon=lon, lat=lat)
+        assert tr.time_s.tolist() == [1714550400.0, 1714550401.5, 1714550403.0], time
+
+
+def test_epoch_as_numeric_strings_is_epoch_seconds() -> None:
+    tr = make(time=["10", "11", "12.5", "13"])
+    assert tr.time_s.tolist() == [10.0, 11.0, 12.5, 13.0]
+
+
+def test_unparseable_time_names_row_and_raw_value() -> None:
+    with pytest.raises(InvalidTraceError) as exc:
+        make(time=["2024-05-01T08:00:00Z", "2024-05-01T08:00:01Z", "soon", None], trace_id="x")
+    msg = str(exc.value)
+    assert "trace 'x'" in msg
+    assert "time is missing or not a time in 2 row(s)" in msg
+    assert "row 2 = 'soon'" in msg
+    assert "row 3 = missing" in msg
+    assert "ISO-8601" in msg
+    assert exc.value.rows == (2, 3)
+    assert exc.value.field == "time"
+
+
+def test_epoch_milliseconds_are_refused_with_a_hint() -> None:
+    with pytest.raises(InvalidTraceError, match="divide by 1000") as exc:
+        make(time=[1714550400000, 1714550401000, 1714550402000, 1714550403000])
+    assert exc.value.rows == (0, 1, 2, 3)
+
+
+# ------------------------------------------------------------------ coordinates
+
+
+def test_lat_out_of_range_lists_rows_and_count() -> None:
+    lat = [43.73] * 10
+    for i in (1, 3, 4, 6, 7, 9):
+        lat[i] = 91.0 + i
+    with pytest.raises(InvalidTraceError) as exc:
+        Trace(time=range(10), lon=[7.42] * 10, lat=lat, trace_id="far")
+    msg = str(exc.value)
+    assert "trace 'far'" in msg
+    assert "lat is out of range [-90, 90] in 6 row(s)" in msg
+    assert "row 1 = 92, row 3 = 94, row 4 = 95, row 6 = 97, row 7 = 98 and 1 more" in msg
+    assert "row 9" not in msg
+    assert exc.value.rows == (1, 3, 4, 6, 7, 9)
+
+
+def test_lon_out_of_range() -> None:
+    with pytest.raises(
+        InvalidTraceError, match=r"lon is out of range \[-180, 180\] in 1 row\(s\): row 2 = 181"
+    ):
+        make(lon=[7.42, 7.42, 181.0, 7.42])
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), None, ""])
+def test_non_finite_lat_is_an_error(bad: object) -> None:
+    with pytest.raises(
+        InvalidTraceError, match=r"lat is missing or not finite in 1 row\(s\): row 1"
+    ) as exc:
+        make(lat=[43.73, bad, 43.73, 43.73])
+    assert exc.value.field == "lat"
+
+
+def test_text_coordinate_names_the_value() -> None:
+    with pytest.raises(
+        InvalidTraceError, match=r"lon is not a number in 1 row\(s\): row 3 = '7,42'"
+    ):
+        make(lon=["7.42", "7.42", "7.42", "7,42"])
+
+
+def test_all_lat_beyond_90_hints_swapped_lon_lat() -> None:
+    with pytest.raises(InvalidTraceError, match="swapped lon/lat") as exc:
+        Trace(time=[0, 1, 2], lon=[35.68, 35.68, 35.69], lat=[139.70, 139.71, 139.72])
+    assert "every lat looks like a longitude" in str(exc.value)
+
+
+def test_mismatched_lengths() -> None:
+    with pytest.raises(InvalidTraceError, match="'lat' has 3 values but 'time' has 4"):
+        make(lat=LAT[:3])
+
+
+def test_fewer_than_two_points_after_collapsing() -> None:
+    with pytest.raises(
+        InvalidTraceError, match=r"1 point.* after collapsing 2 repeated time"
+    ) as exc:
+        Trace(time=[5, 5, 5], lon=LON[:3], lat=LAT[:3], trace_id="still")
+    assert "trace 'still'" in str(exc.value)
+    assert exc.value.rows == (1, 2)
+
+
+def test_single_point_is_an_error() -> None:
+    with pytest.raises(InvalidTraceError, match="at least 2 points"):
+        Trace(time=[0], lon=[7.42], lat=[43.73])
+
+
+def test_unknown_crs() -> None:
+    with pytest.raises(InvalidTraceError, match=r"unknown crs 'utm'.*wgs84, gcj02, bd09"):
+        make(crs="utm")
+
+
+# ------------------------------------------------------------------ optional fields
+
+
+def test_heading_normalised_and_non_finite_becomes_nan() -> None:
+    tr = make(heading=[-90.0, 360.0, float("inf"), None])
+    np.testing.assert_array_equal(tr.heading_deg, [270.0, 0.0, np.nan, np.nan])
+
+
+def test_tiny_negative_heading_stays_below_360() -> None:
+    tr = make(heading=[-1e-15, 725.0, 0.0, 359.5])
+    np.testing.assert_array_equal(tr.heading_deg, [0.0, 5.0, 0.0, 359.5])
+
+
+def test_negative_speed_names_row_and_value() -> None:
+    with pytest.raises(InvalidTraceError) as exc:
+        make(speed=[1.0, -2.5, float("nan"), 3.0], trace_id="s")
+    msg = str(exc.value)
+    assert "trace 's'" in msg
+    assert "speed breaks the rule: must be >= 0 m/s in 1 row(s): row 1 = -2.5" in msg
+    assert exc.value.field == "speed"
+
+
+@pytest.mark.parametrize("bad", [0.0, -3.0])
+def test_accuracy_must_be_positive(bad: float) -> None:
+    with pytest.raises(
+        InvalidTraceError, match=rf"accuracy breaks the rule: must be > 0 m .*row 2 = {bad:g}"
+    ):
+        make(accuracy=[3.0, 4.0, bad, float("nan")])
+
+
+def test_hdop_only_gives_accuracy_via_uere() -> None:
+    tr = make(hdop=[1.0, 2.0, float("nan"), 0.8])
+    assert UERE_M == 5.0
+    np.testing.assert_array_equal(tr.accuracy_m, [5.0, 10.0, np.nan, 4.0])
+
+
+def test_accuracy_wins_over_hdop_where_known() -> None:
+    tr = make(accuracy=[3.0, np.nan, 7.0, np.nan], hdop=[1.0, 2.0, 3.0, np.nan])
+    np.testing.assert_array_equal(tr.accuracy_m, [3.0, 10.0, 7.0, np.nan])
+
+
+def test_decreasing_odometer_names_both_rows() -> None:
+    with pytest.raises(InvalidTraceError) as exc:
+        make(odometer=[0.0, 10.0, np.nan, 8.0], trace_id="odo")
+    msg = str(exc.value)
+    assert "odometer decreases in time at 1 row(s): row 3 = 8 after row 1 = 10" in msg
+    assert exc.value.rows == (3,)
+
+
+def test_odometer_checked_in_time_order_not_input_order() -> None:
+    tr = make(time=[3, 0, 1, 2], odometer=[30.0, 0.0, 10.0, 20.0])
+    np.testing.assert_array_equal(tr.odometer_m, [0.0, 10.0, 20.0, 30.0])
+
+
+# ------------------------------------------------------------------ sorting and collapsing
+
+
+def test_out_of_order_rows_are_sorted_and_reported() -> None:
+    tr = make(time=[0, 2, 1, 3], speed=[0.0, 2.0, 1.0, 3.0])
+    assert tr.time_s.tolist() == [0.0, 1.0, 2.0, 3.0]
+    assert tr.lon.tolist() == [LON[0], LON[2], LON[1], LON[3]]
+    np.testing.assert_array_equal(tr.speed_mps, [0.0, 1.0, 2.0, 3.0])
+    assert tr.report.reordered_rows == 1
+    assert tr.report.warnings == (
+        "1 row out of time order was sorted (first step back in time at row 2)",
+    )
+
+
+def test_one_late_first_row_counts_as_one_reordered_row() -> None:
+    tr = Trace(time=[9, 1, 2, 3, 4], lon=[1.0, 2, 3, 4, 5], lat=[1.0, 2, 3, 4, 5])
+    assert tr.report.reordered_rows == 1
+    assert tr.lon.tolist() == [2.0, 3.0, 4.0, 5.0, 1.0]
+
+
+def test_duplicate_times_collapse_keeping_first_input_row() -> None:
+    tr = Trace(
+        time=[0, 1, 1, 2, 0, 1],
+        lon=[1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
+        lat=[10.0, 20.0, 30.0, 40.0, 50.0, 60.0],
+    )
+    assert tr.time_s.tolist() == [0.0, 1.0, 2.0]
+    assert tr.lon.tolist() == [1.0, 2.0, 4.0]
+    assert tr.report.duplicate_time_rows == (2, 4, 5)
+    assert tr.report.input_rows == 6
+    assert "rows 2, 4, 5 repeat an earlier time and were collapsed" in tr.report.warnings[-1]
+
+
+@st.composite
+def shuffled_traces(draw: st.DrawFn) -> tuple[dict[str, list[float]], list[int]]:
+    n = draw(st.integers(min_value=2, max_value=30))
+    times = draw(st.lists(st.integers(0, 10_000), min_size=n, max_size=n, unique=True).map(sorted))
+    lon = draw(st.lists(st.floats(-180, 180), min_size=n, max_size=n))
+    lat = draw(st.lists(st.floats(-89, 89), min_size=n, max_size=n))
+    speed = draw(st.lists(st.floats(0, 60), min_size=n, max_size=n))
+    perm = draw(st.permutations(list(range(n))))
+    cols = {"time": [float(t) for t in times], "lon": lon, "lat": lat, "speed": speed}
+    return cols, perm
+
+
+@settings(derandomize=True, max_examples=60, deadline=None)
+@given(data=shuffled_traces())
+def test_any_permutation_gives_the_same_sorted_trace(
+    data: tuple[dict[str, list[float]], list[int]],
+) -> None:
+    cols, perm = data
+    ref = Trace(**cols)  # type: ignore[arg-type]
+    shuffled = {k: [v[i] for i in perm] for k, v in cols.items()}
+    tr = Trace(**shuffled)  # type: ignore[arg-type]
+    for name in ("time_s", "lon", "lat", "speed_mps"):
+        np.testing.assert_array_equal(getattr(tr, name), getattr(ref, name))
+    assert tr.time_s.tolist() == cols["time"]
+    assert tr.report.duplicate_time_rows == ()
+    assert (tr.report.reordered_rows == 0) == (perm == sorted(perm))
+
+
+# ------------------------------------------------------------------ tables and records
+
+
+def test_from_dataframe_aliases_any_case_and_ignores_extras() -> None:
+    df = pd.DataFrame(
+        {
+            "TimeStamp": [0, 1, 2],
+            "Latitude": LAT[:3],
+            "LNG": LON[:3],
+            "course": [10.0, 20.0, 30.0],
+            "Speed_mps": [1.0, 2.0, 3.0],
+            "accuracy_m": [4.0, 5.0, 6.0],
+            "Odometer_M": [0.0, 1.0, 2.0],
+            "driver": ["a", "b", "c"],
+        }
+    )
+    tr = Trace.from_dataframe(df, trace_id="df")
+    assert tr.trace_id == "df"
+    assert tr.lon.tolist() == LON[:3]
+    np.testing.assert_array_equal(tr.heading_deg, [10.0, 20.0, 30.0])
+    np.testing.assert_array_equal(tr.accuracy_m, [4.0, 5.0, 6.0])
+    np.testing.assert_array_equal(tr.odometer_m, [0.0, 1.0, 2.0])
+
+
+def test_two_columns_aliasing_one_field_names_both() -> None:
+    df = pd.DataFrame(
+        {"time": [0, 1], "lat": [1.0, 2.0], "lon": [1.0, 2.0], "Bearing": [1, 2], "course": [1, 2]}
+    )
+    with pytest.raises(
+        InvalidTraceError, match="columns 'Bearing' and 'course' both give 'heading'"
+    ):
+        Trace.from_dataframe(df)
+
+
+def test_missing_required_column_lists_found_columns() -> None:
+    df = pd.DataFrame({"time": [0, 1], "y": [1.0, 2.0], "lon": [1.0, 2.0]})
+    with pytest.raises(InvalidTraceError) as exc:
+        Trace.from_dataframe(df, trace_id="m")
+    msg = str(exc.value)
+    assert "trace 'm'" in msg
+    assert "missing required column(s) 'lat' (or latitude)" in msg
+    assert "found columns: 'time', 'y', 'lon'" in msg
+    assert exc.value.field == "lat"
+
+
+def test_from_dataframe_takes_the_id_column_and_refuses_two_ids() -> None:
+    df = pd.DataFrame({"trace_id": ["k9", "k9"], "t": [0, 1], "lat": [1.0, 2.0], "lon": [1.0, 2.0]})
+    assert Trace.from_dataframe(df).trace_id == "k9"
+    df.loc[1, "trace_id"] = "k10"
+    with pytest.raises(
+        InvalidTraceError, match=r"holds 2 ids \('k9', 'k10'\); use mapmatch.read_traces"
+    ):
+        Trace.from_dataframe(df)
+
+
+def test_to_dataframe_round_trip() -> None:
+    tr = make(time=[3, 1, 2, 0], heading=[1.0, 2.0, 3.0, 4.0], hdop=[1.0, 1.0, 2.0, 2.0])
+    df = tr.to_dataframe()
+    assert list(df.columns) == ["time", "lon", "lat", "heading", "accuracy"]
+    assert df["time"].tolist() == [0.0, 1.0, 2.0, 3.0]
+    back = Trace.from_dataframe(df, trace_id=tr.trace_id)
+    for name in ("time_s", "lon", "lat", "heading_deg", "accuracy_m"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(tr, name))
+
+
+def test_from_records_with_missing_optional_keys() -> None:
+    recs = [
+        {"time": "2024-05-01T08:00:00Z", "lat": 43.73, "lon": 7.42, "speed": 3.0},
+        {"time": "2024-05-01T08:00:01Z", "lat": 43.74, "lon": 7.43},
+    ]
+    tr = Trace.from_records(recs, trace_id="rec")
+    assert tr.time_s.tolist() == [1714550400.0, 1714550401.0]
+    np.testing.assert_array_equal(tr.speed_mps, [3.0, np.nan])
+
+
+def test_from_records_bad_row_named() -> None:
+    recs = [
+        {"time": 0, "lat": 43.73, "lon": 7.42},
+        {"time": 1, "lat": 43.73, "lon": 7.42, "speed": -1},
+    ]
+    with pytest.raises(InvalidTraceError, match=r"trace 'body': speed .* row 1 = -1"):
+        Trace.from_records(recs, trace_id="body")
+
+
+def test_from_records_refuses_non_objects() -> None:
+    with pytest.raises(InvalidTraceError, match="record 1 is a list, not an object"):
+        Trace.from_records([{"time": 0, "lat": 1.0, "lon": 1.0}, [1, 1.0, 1.0]])  # type: ignore[list-item]
+
+
+# ------------------------------------------------------------------ slice
+
+
+def test_slice_keeps_id_and_fields() -> None:
+    tr = make(trace_id="s", speed=[0.0, 1.0, 2.0, 3.0])
+    sub = tr.slice(1, 3)
+    assert sub.trace_id == "s"
+    assert sub.time_s.tolist() == [1.0, 2.0]
+    np.testing.assert_array_equal(sub.speed_mps, [1.0, 2.0])
+    assert sub.report.input_rows == 2
+    assert tr.slice(-2, 4).lon.tolist() == LON[2:]
+
+
+def test_slice_of_one_point_is_an_error() -> None:
+    with pytest.raises(InvalidTraceError, match=r"slice\(2, 3\) of 4 points holds 1"):
+        make().slice(2, 3)
+
+
+# ------------------------------------------------------------------ Chinese frames
+
+
+def test_gcj02_reference_point_converts_to_wgs84() -> None:
+    # Tiananmen: WGS84 (116.404, 39.915) is GCJ-02 (116.410244, 39.916404) to 1e-6 deg.
+    tr = Trace(time=[0, 1], lon=[116.410244, 116.410244], lat=[39.916404, 39.916404], crs="gcj02")
+    assert tr.lon[0] == pytest.approx(116.404, abs=2e-6)
+    assert tr.lat[0] == pytest.approx(39.915, abs=2e-6)
+
+
+@pytest.mark.parametrize(
+    ("crs", "forward"), [("gcj02", chinacrs.wgs84_to_gcj02), ("bd09", chinacrs.wgs84_to_bd09)]
+)
+def test_china_frames_round_trip(crs: str, forward: object) -> None:
+    lon = np.array([116.404, 121.4737, 113.2644])
+    lat = np.array([39.915, 31.2304, 23.1291])
+    f_lon, f_lat = forward(lon, lat)  # type: ignore[operator]
+    assert np.abs(f_lon - lon).max() > 1e-3  # the frames really differ here
+    tr = Trace(time=[0, 1, 2], lon=f_lon, lat=f_lat, crs=crs)
+    np.testing.assert_allclose(tr.lon, lon, atol=1e-7)
+    np.testing.assert_allclose(tr.lat, lat, atol=1e-7)
+
+
+def test_crs_outside_china_is_unchanged() -> None:
+    tr = make(crs="gcj02")
+    assert tr.lon.tolist() == LON
+    assert tr.lat.tolist() == LAT
+
+
+def test_time_is_strictly_increasing_after_validation() -> None:
+    tr = make(time=[2, 2, 1, 0])
+    assert np.all(np.diff(tr.time_s) > 0)
+    assert math.isclose(tr.time_s[-1], 2.0)
