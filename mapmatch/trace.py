@@ -774,6 +774,8 @@ class _Checker:
 
 
 def _fmt(value: object) -> str:
+    if isinstance(value, np.generic):
+        value = value.item()
     if value is None or value is pd.NA or value is pd.NaT:
         return "missing"
     if isinstance(value, float | np.floating):

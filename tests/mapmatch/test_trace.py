@@ -112,6 +112,11 @@ def test_unparseable_time_names_row_and_raw_value() -> None:
     assert exc.value.field == "time"
 
 
+def test_boolean_time_is_refused_with_plain_values() -> None:
+    with pytest.raises(InvalidTraceError, match=r"time is missing or not a time .*row 0 = True"):
+        make(time=np.array([True, False, True, False]))
+
+
 def test_epoch_milliseconds_are_refused_with_a_hint() -> None:
     with pytest.raises(InvalidTraceError, match="divide by 1000") as exc:
         make(time=[1714550400000, 1714550401000, 1714550402000, 1714550403000])
