@@ -1,0 +1,77 @@
+"""Our matcher as a "peer" (project venv), under the same job, warm-up and timing rules.
+
+``roadnets.load`` is the timed load (the compiled network cache counts as a normal second load);
+traces are read with ``mapmatch.read_traces`` (not timed, like the peers' input preparation);
+``mapmatch.match`` is the timed call. The geometry is the LineStrings of the result's
+``kind == "segment"`` features, in driving order.
+
+Configuration: ``MatchConfig(sigma_m=noise)`` (our documented knob for the sensor noise); any
+other ``MatchConfig`` field can be given through ``params["config"]``.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import Geometry, TracePoints, run_peer
+
+
+def config_kwargs(params: dict[str, Any]) -> dict[str, Any]:
+    """MatchConfig keyword arguments for a set with ``noise_m``."""
+    kw: dict[str, Any] = {"sigma_m": float(params.get("noise_m", 5.0))}
+    kw.update(params.get("config", {}))
+    return kw
+
+
+def load(job: dict[str, Any]) -> dict[str, Any]:
+    """Load the network (timed) and read the traces with our reader."""
+    import mapmatch
+    import roadnets
+
+    net = roadnets.load(job["extract"])
+    traces = {t.trace_id: t for t in mapmatch.read_traces(job["traces_csv"])}
+    kw = config_kwargs(job["params"])
+    return {"net": net, "traces": traces, "config": mapmatch.MatchConfig(**kw), "kw": kw}
+
+
+def prepare(ctx: dict[str, Any], tr: TracePoints) -> Any:
+    """Our Trace object for this trace id."""
+    return ctx["traces"][tr.trace_id]
+
+
+def match(ctx: dict[str, Any], trace: Any) -> Any:
+    """One ``mapmatch.match`` call."""
+    import mapmatch
+
+    return mapmatch.match(trace, ctx["net"], ctx["config"])
+
+
+def geometry(ctx: dict[str, Any], tr: TracePoints, raw: Any) -> Geometry:
+    """LineStrings of the segment features, in order."""
+    fc = raw.to_geojson()
+    out: Geometry = []
+    for feat in fc.get("features", []):
+        props = feat.get("properties") or {}
+        geom = feat.get("geometry") or {}
+        if props.get("kind") == "segment" and geom.get("type") == "LineString":
+            coords = [[float(c[0]), float(c[1])] for c in geom.get("coordinates", [])]
+            if len(coords) >= 2:
+                out.append(coords)
+    return out
+
+
+def settings(ctx: dict[str, Any]) -> dict[str, Any]:
+    """The MatchConfig fields we set."""
+    return {"MatchConfig": ctx["kw"]}
+
+
+def main() -> int:
+    """Entry point: ``python run_ours.py JOB.json``."""
+    return run_peer("ours", load, match, geometry, settings, prepare=prepare)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
