@@ -9,10 +9,13 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from pathlib import Path
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from pathlib import Path
 
 __all__ = ["NetworkArrays"]
 
@@ -108,7 +111,7 @@ class NetworkArrays:
     @classmethod
     def load(cls, folder: Path, *, mmap: bool = True) -> NetworkArrays:
         """Read the arrays written by :meth:`save`, memory-mapped read-only by default."""
-        mode = "r" if mmap else None
+        mode: Literal["r"] | None = "r" if mmap else None
         values = {
             field.name: np.load(folder / f"{field.name}.npy", mmap_mode=mode, allow_pickle=False)
             for field in dataclasses.fields(cls)

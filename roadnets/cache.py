@@ -115,22 +115,23 @@ def write_entry(
 
 
 def read_entry(folder: Path) -> tuple[NetworkArrays, dict[str, Any]] | None:
-    """
-    Read and verify an entry; ``None`` when there is none or it was corrupt (then removed).
-    """
+    """Read and verify an entry; ``None`` when there is none or it was corrupt (then removed)."""
     meta_path = folder / "meta.json"
     if not meta_path.exists():
         return None
     try:
         meta = json.loads(meta_path.read_text(encoding="utf-8"))
         if meta.get("format_version") != FORMAT_VERSION:
-            raise ValueError("format version differs")
+            msg = "format version differs"
+            raise ValueError(msg)
         checksums: dict[str, str] = meta["checksums"]
         if set(checksums) != set(NetworkArrays.file_names()):
-            raise ValueError("array files differ")
+            msg = "array files differ"
+            raise ValueError(msg)
         for name, expected in checksums.items():
             if _checksum(folder / name) != expected:
-                raise ValueError(f"checksum of {name} differs")
+                msg = f"checksum of {name} differs"
+                raise ValueError(msg)
         arrays = NetworkArrays.load(folder)
     except (OSError, ValueError, KeyError, TypeError) as exc:
         _log.warning("network cache entry %s is corrupt (%s); rebuilding it", folder, exc)

@@ -7,14 +7,18 @@ direction.
 
 from __future__ import annotations
 
+import itertools
 from collections import defaultdict
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from roadnets.arrays import NetworkArrays
 from roadnets.drivable import ROAD_CLASSES, direction_flags, road_speed_kph
-from roadnets.osm_reader import OsmExtract, TurnRestriction
 from roadnets.projection import Projector, utm_epsg
+
+if TYPE_CHECKING:
+    from roadnets.osm_reader import OsmExtract, TurnRestriction
 
 __all__ = ["choose_projector", "compile_network"]
 
@@ -64,7 +68,7 @@ def compile_network(extract: OsmExtract, projector: Projector) -> NetworkArrays:
         speed_bwd = road_speed_kph(way.tags, forward=False) / 3.6
         cls = _CLASS_INDEX[way.tags["highway"]]
         cuts = [i for i, nid in enumerate(way.node_ids.tolist()) if nid in is_graph_node]
-        for a, b in zip(cuts[:-1], cuts[1:], strict=True):
+        for a, b in itertools.pairwise(cuts):
             gx, gy = xs[a : b + 1], ys[a : b + 1]
             u = _node(node_index, node_xy, int(way.node_ids[a]), float(gx[0]), float(gy[0]))
             v = _node(node_index, node_xy, int(way.node_ids[b]), float(gx[-1]), float(gy[-1]))
@@ -161,7 +165,7 @@ def _ranges(counts: np.ndarray) -> np.ndarray:
     """``[0..c0-1, 0..c1-1, ...]`` for an array of counts."""
     total = int(counts.sum())
     starts = np.repeat(np.cumsum(counts) - counts, counts)
-    return np.arange(total, dtype=np.int64) - starts
+    return np.asarray(np.arange(total, dtype=np.int64) - starts, dtype=np.int64)
 
 
 def _banned_turns(

@@ -6,7 +6,10 @@ Pure functions over a way's tag dictionary; the graph builder calls them once pe
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping
 
 __all__ = [
     "DEFAULT_SPEED_KPH",
@@ -185,8 +188,10 @@ def parse_maxspeed_kph(value: str | None) -> float | None:
 
 def road_speed_kph(tags: Mapping[str, str], *, forward: bool) -> float:
     """
-    Speed limit of a way in one direction, km/h: ``maxspeed:forward``/``:backward``, then
-    ``maxspeed``, then the class default of :data:`DEFAULT_SPEED_KPH`.
+    Speed limit of a way in one direction, km/h.
+
+    ``maxspeed:forward``/``:backward`` first, then ``maxspeed``, then the class default of
+    :data:`DEFAULT_SPEED_KPH`.
 
     Examples
     --------

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import time
 from importlib import resources
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from roadnets.cache import (
     default_cache_dir,
@@ -27,6 +27,9 @@ from roadnets.errors import (
 from roadnets.network import RoadNetwork
 from roadnets.osm_reader import read_osm
 from roadnets.projection import Projector
+
+if TYPE_CHECKING:
+    import os
 
 __all__ = ["DEFAULT_NETWORK", "default_network_path", "load", "network_id_of"]
 

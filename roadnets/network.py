@@ -120,7 +120,7 @@ class RoadNetwork:
         a = self.arrays
         base = np.concatenate(([0.0], np.cumsum(a.edge_length_m + 1.0)[:-1]))
         sizes = np.diff(a.edge_geom_ptr)
-        return a.geom_cum_m + np.repeat(base, sizes)
+        return np.asarray(a.geom_cum_m + np.repeat(base, sizes), dtype=np.float64)
 
     def point_on_edge(self, edge: IntArray, offset_m: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Positions (metres) at ``offset_m`` along each ``edge``, vectorised."""
@@ -155,7 +155,8 @@ class RoadNetwork:
         """OSM ``(u, v, key)`` of each edge (u and v are OSM node ids)."""
         a = self.arrays
         edge = np.asarray(edge, dtype=np.int64)
-        return a.node_osm_id[a.edge_u[edge]], a.node_osm_id[a.edge_v[edge]], a.edge_key[edge]
+        key = a.edge_key[edge].astype(np.int64)
+        return a.node_osm_id[a.edge_u[edge]], a.node_osm_id[a.edge_v[edge]], key
 
     @cached_property
     def bbox(self) -> tuple[float, float, float, float]:
@@ -174,7 +175,9 @@ class RoadNetwork:
         km = np.bincount(
             a.edge_class[once], weights=a.edge_length_m[once], minlength=len(ROAD_CLASSES)
         )
-        by_class = {name: round(float(k) / 1000.0, 3) for name, k in zip(ROAD_CLASSES, km) if k}
+        by_class = {
+            name: round(float(k) / 1000.0, 3) for name, k in zip(ROAD_CLASSES, km, strict=True) if k
+        }
         total = float(a.edge_length_m[once].sum())
         oneway = float(a.edge_length_m[once & a.edge_oneway].sum())
         return NetworkInfo(

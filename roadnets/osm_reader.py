@@ -9,7 +9,7 @@ nodes that are present.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -17,6 +17,9 @@ import osmium
 
 from roadnets.drivable import is_drivable
 from roadnets.errors import InvalidNetworkSourceError
+
+if TYPE_CHECKING:
+    from pathlib import Path
 
 __all__ = ["OsmExtract", "OsmWay", "TurnRestriction", "read_osm"]
 
@@ -119,7 +122,7 @@ def read_osm(path: Path) -> OsmExtract:
     try:
         processor = osmium.FileProcessor(_osmium_file(path)).with_locations()
         for obj in processor:
-            if obj.is_way():
+            if isinstance(obj, osmium.osm.Way):
                 tags = obj.tags
                 if "highway" not in tags:
                     continue
@@ -129,8 +132,12 @@ def read_osm(path: Path) -> OsmExtract:
                 nodes = obj.nodes
                 ids = np.fromiter((nd.ref for nd in nodes), dtype=np.int64, count=len(nodes))
                 valid = np.fromiter((nd.location.valid() for nd in nodes), bool, len(nodes))
-                lon = np.array([nd.lon if ok else np.nan for nd, ok in zip(nodes, valid)])
-                lat = np.array([nd.lat if ok else np.nan for nd, ok in zip(nodes, valid)])
+                lon = np.array(
+                    [nd.lon if ok else np.nan for nd, ok in zip(nodes, valid, strict=True)]
+                )
+                lat = np.array(
+                    [nd.lat if ok else np.nan for nd, ok in zip(nodes, valid, strict=True)]
+                )
                 if valid.all():
                     if len(ids) >= 2:
                         ways.append(OsmWay(obj.id, ids, lon, lat, kept))
@@ -140,7 +147,7 @@ def read_osm(path: Path) -> OsmExtract:
                     ways.append(
                         OsmWay(obj.id, ids[start:stop], lon[start:stop], lat[start:stop], kept)
                     )
-            elif obj.is_relation():
+            elif isinstance(obj, osmium.osm.Relation):
                 restriction = _restriction(obj)
                 if restriction is not None:
                     restrictions.append(restriction)
@@ -154,8 +161,12 @@ def _restriction(relation: osmium.osm.Relation) -> TurnRestriction | None:
     tags = relation.tags
     if tags.get("type") != "restriction":
         return None
-    kind = tags.get("restriction:motorcar", tags.get("restriction:motor_vehicle"))
-    kind = kind or tags.get("restriction", "")
+    kind = (
+        tags.get("restriction:motorcar")
+        or tags.get("restriction:motor_vehicle")
+        or tags.get("restriction")
+        or ""
+    )
     if not kind.startswith(("no_", "only_")):
         return None
     from_way = via = to_way = None

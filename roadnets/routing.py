@@ -11,12 +11,14 @@ from __future__ import annotations
 
 import heapq
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from roadnets.arrays import NetworkArrays
+if TYPE_CHECKING:
+    from roadnets.arrays import NetworkArrays
 
 __all__ = ["PathTable", "shortest_path_table"]
 
@@ -108,14 +110,18 @@ class PathTable:
 
     def lookup(self, source: IntArray, target: IntArray) -> tuple[FloatArray, FloatArray]:
         """
-        Path length and free-flow time for arrays of node pairs; ``inf`` where the table has
-        no path (unreachable, or beyond the bound the source was searched with).
+        Path length and free-flow time for arrays of node pairs.
+
+        ``inf`` where the table has no path (unreachable, or beyond the bound the source was
+        searched with).
         """
         wanted = np.asarray(source, np.int64) * self.n_nodes + np.asarray(target, np.int64)
         where = np.searchsorted(self.keys, wanted)
         where_c = np.minimum(where, len(self.keys) - 1) if len(self.keys) else where
-        found = (where < len(self.keys)) & (self.keys[where_c] == wanted) if len(self.keys) else (
-            np.zeros(len(wanted), dtype=bool)
+        found = (
+            (where < len(self.keys)) & (self.keys[where_c] == wanted)
+            if len(self.keys)
+            else (np.zeros(len(wanted), dtype=bool))
         )
         dist = np.full(len(wanted), np.inf)
         time = np.full(len(wanted), np.inf)

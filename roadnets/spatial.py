@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 from rtree import index as rtree_index
 
-from roadnets.arrays import NetworkArrays
+if TYPE_CHECKING:
+    from roadnets.arrays import NetworkArrays
 
 __all__ = ["EdgeHits", "build_rtree", "query_edges"]
 
@@ -92,7 +94,7 @@ def query_edges(
     radius = np.broadcast_to(np.asarray(radius_m, dtype=np.float64), x.shape)
     mins = np.column_stack((x - radius, y - radius))
     maxs = np.column_stack((x + radius, y + radius))
-    seg, counts = tree.intersection_v(mins, maxs)
+    seg, counts = tree.intersection_v(mins, maxs)  # type: ignore[no-untyped-call]
     point = np.repeat(np.arange(len(x), dtype=np.int64), counts.astype(np.int64))
     start = arrays.seg_start[seg]
     ax, ay = arrays.geom_x[start], arrays.geom_y[start]

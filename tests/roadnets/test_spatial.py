@@ -1,0 +1,98 @@
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+if TYPE_CHECKING:
+    import roadnets
+
+
+def _brute_force(
+    net: roadnets.RoadNetwork, x: float, y: float, radius: float
+) -> dict[int, tuple[float, float]]:
+    """Every directed edge within radius: (distance, offset), scanning every segment."""
+    a = net.arrays
+    out: dict[int, tuple[float, float]] = {}
+    for e in range(a.n_edges):
+        lo, hi = a.edge_geom_ptr[e], a.edge_geom_ptr[e + 1]
+        gx, gy, cum = a.geom_x[lo:hi], a.geom_y[lo:hi], a.geom_cum_m[lo:hi]
+        best = (np.inf, 0.0)
+        for i in range(len(gx) - 1):
+            dx, dy = gx[i + 1] - gx[i], gy[i + 1] - gy[i]
+            seg2 = dx * dx + dy * dy
+            t = 0.0 if seg2 == 0 else min(max(((x - gx[i]) * dx + (y - gy[i]) * dy) / seg2, 0), 1)
+            d = float(np.hypot(x - gx[i] - t * dx, y - gy[i] - t * dy))
+            if d < best[0]:
+                best = (d, float(cum[i] + t * np.sqrt(seg2)))
+        if best[0] <= radius:
+            out[e] = best
+    return out
+
+
+@settings(max_examples=60)
+@given(
+    fx=st.floats(min_value=0.0, max_value=1.0),
+    fy=st.floats(min_value=0.0, max_value=1.0),
+    radius=st.floats(min_value=1.0, max_value=120.0),
+)
+def test_rtree_query_agrees_with_a_brute_force_scan(
+    oakland_net: roadnets.RoadNetwork, fx: float, fy: float, radius: float
+) -> None:
+    a = oakland_net.arrays
+    x = a.geom_x.min() - 50 + fx * (np.ptp(a.geom_x) + 100)
+    y = a.geom_y.min() - 50 + fy * (np.ptp(a.geom_y) + 100)
+    hits = oakland_net.nearby_edges(np.array([x]), np.array([y]), radius)
+    expected = _brute_force(oakland_net, x, y, radius)
+    found = {
+        int(e): (float(d), float(o))
+        for e, d, o in zip(hits.edge, hits.distance_m, hits.offset_m, strict=True)
+    }
+    # a point exactly on the radius may fall either way by rounding
+    assert set(found) ^ set(expected) <= {
+        e for e, (d, _) in expected.items() if abs(d - radius) < 1e-6
+    }
+    for e in set(found) & set(expected):
+        assert abs(found[e][0] - expected[e][0]) < 1e-6
+        # the offset is unique unless two segments of the edge are equally near
+        assert abs(found[e][1] - expected[e][1]) < 1e-6 or abs(found[e][0] - expected[e][0]) < 1e-6
+    assert list(hits.distance_m) == sorted(hits.distance_m)
+
+
+def test_projection_lies_on_the_edge_and_bearing_follows_it(
+    default_net: roadnets.RoadNetwork,
+) -> None:
+    a = default_net.arrays
+    rng = np.random.default_rng(7)
+    x = rng.uniform(a.geom_x.min(), a.geom_x.max(), 500)
+    y = rng.uniform(a.geom_y.min(), a.geom_y.max(), 500)
+    hits = default_net.nearby_edges(x, y, 60.0, max_per_point=6)
+    px, py = default_net.point_on_edge(hits.edge, hits.offset_m)
+    assert np.allclose(px, hits.x, atol=1e-6)
+    assert np.allclose(py, hits.y, atol=1e-6)
+    assert np.allclose(np.hypot(x[hits.point] - hits.x, y[hits.point] - hits.y), hits.distance_m)
+    assert np.bincount(hits.point, minlength=500).max() <= 6
+    # the bearing points from the projection towards the edge's next vertex
+    ahead_x, ahead_y = default_net.point_on_edge(hits.edge, hits.offset_m + 0.5)
+    moved = np.hypot(ahead_x - hits.x, ahead_y - hits.y) > 0.2
+    bearing = np.degrees(np.arctan2(ahead_x - hits.x, ahead_y - hits.y)) % 360
+    diff = np.abs((bearing - hits.bearing_deg + 180) % 360 - 180)
+    assert np.median(diff[moved]) < 1.0
+
+
+def test_both_directions_of_a_two_way_road_are_candidates(
+    default_net: roadnets.RoadNetwork,
+) -> None:
+    a = default_net.arrays
+    e = int(np.flatnonzero(a.edge_twin >= 0)[0])
+    mx, my = default_net.point_on_edge(np.array([e]), np.array([a.edge_length_m[e] / 2]))
+    hits = default_net.nearby_edges(mx, my, 5.0)
+    found = set(hits.edge.tolist())
+    assert {e, int(a.edge_twin[e])} <= found
+    twin_row = int(np.flatnonzero(hits.edge == a.edge_twin[e])[0])
+    row = int(np.flatnonzero(hits.edge == e)[0])
+    assert hits.offset_m[row] + hits.offset_m[twin_row] == pytest.approx(a.edge_length_m[e])
+    assert abs(((hits.bearing_deg[row] - hits.bearing_deg[twin_row]) % 360) - 180) < 1e-6
