@@ -1,0 +1,27 @@
+"""
+Pictures of a match: an interactive map and a static figure, to see what the matcher did.
+
+Needs the ``viz`` extra (``pip install mapmatch[viz]``: folium and matplotlib); both are
+imported only when a drawing is made, so ``import mapmatch`` never loads them.
+
+>>> import roadnets, mapmatch, mapmatch.viz                      # doctest: +SKIP
+>>> net = roadnets.load()                                         # doctest: +SKIP
+>>> result = mapmatch.match(trace, net, diagnostics=True)         # doctest: +SKIP
+>>> mapmatch.viz.match_map(result, net, candidates_of=12)         # doctest: +SKIP
+>>> mapmatch.viz.match_figure(result, net).savefig("match.png")   # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from mapmatch.viz.data import CANDIDATE_COLUMNS, candidate_table, confidence_colour
+from mapmatch.viz.leaflet import LAYER_NAMES, match_map
+from mapmatch.viz.static import match_figure
+
+__all__ = [
+    "CANDIDATE_COLUMNS",
+    "LAYER_NAMES",
+    "candidate_table",
+    "confidence_colour",
+    "match_figure",
+    "match_map",
+]

@@ -1,0 +1,258 @@
+"""What the match drawings show, as plain arrays and tables (no plotting library needed).
+
+Both drawings (:mod:`mapmatch.viz.leaflet` and :mod:`mapmatch.viz.static`) take their
+geometry from here, so the interactive map and the static figure always show the same thing.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+
+from mapmatch.config import MatchConfig
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from mapmatch.result import MatchResult
+    from roadnets import RoadNetwork
+
+__all__ = [
+    "CANDIDATE_COLUMNS",
+    "Polyline",
+    "candidate_table",
+    "confidence_colour",
+    "matched_edge_lines",
+    "network_lines",
+    "trace_box_m",
+]
+
+FloatArray = npt.NDArray[np.float64]
+
+#: Columns of :func:`candidate_table` (those of ``result.diagnostics.candidates``).
+CANDIDATE_COLUMNS = (
+    "fix",
+    "edge",
+    "u",
+    "v",
+    "key",
+    "lon",
+    "lat",
+    "distance_m",
+    "log_emission",
+    "log_transition",
+    "posterior",
+    "chosen",
+)
+
+#: Confidence colour scale, low to high (red, amber, green; colour-blind safe ends).
+CONFIDENCE_COLOURS = ("#d7191c", "#fdae61", "#1a9641")
+
+#: Colours of successive segments of a matched path.
+SEGMENT_COLOURS = ("#2b83ba", "#7b3294", "#008837", "#e66101", "#5e3c99", "#0571b0")
+
+
+@dataclass(frozen=True, slots=True)
+class Polyline:
+    """
+    One line to draw, WGS84 degrees, with a short label for its tooltip.
+
+    ``edge`` is the network edge it shows (-1 when it is not one edge).
+    """
+
+    lon: FloatArray
+    lat: FloatArray
+    label: str
+    edge: int = -1
+
+
+def trace_box_m(
+    result: MatchResult, net: RoadNetwork, *, margin_m: float = 150.0
+) -> tuple[float, float, float, float]:
+    """
+    Bounding box ``(min_x, min_y, max_x, max_y)`` in metres of the raw and snapped fixes.
+
+    The box is widened by ``margin_m`` on every side.
+
+    Raises
+    ------
+    ValueError
+        No fix has a finite position.
+    """
+    p = result.points
+    lon = np.concatenate((p.raw_lon, p.lon))
+    lat = np.concatenate((p.raw_lat, p.lat))
+    ok = np.isfinite(lon) & np.isfinite(lat)
+    if not ok.any():
+        msg = f"trace {result.trace_id!r}: no fix has a finite position to draw"
+        raise ValueError(msg)
+    x, y = net.project(lon[ok], lat[ok])
+    return (
+        float(x.min()) - margin_m,
+        float(y.min()) - margin_m,
+        float(x.max()) + margin_m,
+        float(y.max()) + margin_m,
+    )
+
+
+def network_lines(net: RoadNetwork, box_m: tuple[float, float, float, float]) -> list[Polyline]:
+    """
+    Cut the road network to a box (metres): one line per road geometry, unprojected.
+
+    Both directions of a two-way road share one geometry and are drawn once. An edge is kept
+    when its bounding box overlaps ``box_m``.
+    """
+    a = net.arrays
+    ptr = np.asarray(a.edge_geom_ptr)
+    starts = ptr[:-1]
+    min_x = np.minimum.reduceat(a.geom_x, starts)
+    max_x = np.maximum.reduceat(a.geom_x, starts)
+    min_y = np.minimum.reduceat(a.geom_y, starts)
+    max_y = np.maximum.reduceat(a.geom_y, starts)
+    x0, y0, x1, y1 = box_m
+    twin = np.asarray(a.edge_twin)
+    edges = np.arange(a.n_edges)
+    keep = (max_x >= x0) & (min_x <= x1) & (max_y >= y0) & (min_y <= y1)
+    keep &= (twin < 0) | (edges < twin)
+    chosen = np.flatnonzero(keep)
+    if len(chosen) == 0:
+        return []
+    sizes = ptr[chosen + 1] - ptr[chosen]
+    vertex = np.repeat(ptr[chosen] - np.cumsum(sizes) + sizes, sizes) + np.arange(int(sizes.sum()))
+    lon, lat = net.unproject(a.geom_x[vertex], a.geom_y[vertex])
+    bounds = np.concatenate(([0], np.cumsum(sizes)))
+    lines = []
+    for i, e in enumerate(chosen.tolist()):
+        lo, hi = int(bounds[i]), int(bounds[i + 1])
+        lines.append(Polyline(lon[lo:hi], lat[lo:hi], _edge_label(net, e), e))
+    return lines
+
+
+def matched_edge_lines(result: MatchResult, net: RoadNetwork) -> list[list[Polyline]]:
+    """Return the driven stretch of every matched edge, grouped by segment, unprojected."""
+    groups: list[list[Polyline]] = []
+    for seg in result.segments:
+        lines = []
+        for e in seg.edges:
+            x, y = net.edge_polyline(e.edge, e.start_offset_m, e.end_offset_m)
+            lon, lat = net.unproject(x, y)
+            label = (
+                f"segment {seg.index} (fixes {seg.first}-{seg.last}): "
+                f"{_edge_label(net, e.edge)}, driven {e.driven_m:.0f} m"
+            )
+            lines.append(Polyline(lon, lat, label, e.edge))
+        groups.append(lines)
+    return groups
+
+
+def edge_line(net: RoadNetwork, edge: int) -> tuple[FloatArray, FloatArray]:
+    """Return the whole geometry of one edge, WGS84 degrees, in driving order."""
+    a = net.arrays
+    lo, hi = int(a.edge_geom_ptr[edge]), int(a.edge_geom_ptr[edge + 1])
+    return net.unproject(np.asarray(a.geom_x[lo:hi]), np.asarray(a.geom_y[lo:hi]))
+
+
+def candidate_table(result: MatchResult, net: RoadNetwork, fix: int) -> pd.DataFrame:
+    """
+    List the candidates of one fix and their scores, one row per candidate edge.
+
+    With a result of ``mapmatch.match(..., diagnostics=True)`` the rows are the model's own
+    (``result.diagnostics.candidates`` for this fix): distance, log emission, log transition
+    from the previous model fix's chosen candidate, posterior and whether it was chosen.
+    Without diagnostics, or for a fix that did not enter the model, the rows are the directed
+    edges within the default search radius of the raw fix and the scores are NaN.
+
+    Parameters
+    ----------
+    result
+        A match result.
+    net
+        The network it was matched on.
+    fix
+        Index of the fix in the trace (negative counts from the end).
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns :data:`CANDIDATE_COLUMNS`, nearest candidate first.
+
+    Raises
+    ------
+    IndexError
+        ``fix`` is outside the trace.
+    """
+    import pandas as pd
+
+    n = len(result.points.time_s)
+    if not -n <= fix < n:
+        msg = f"fix {fix} is outside the trace (it has {n} fixes, indices 0..{n - 1})"
+        raise IndexError(msg)
+    fix = fix % n
+    if result.diagnostics is not None:
+        table = result.diagnostics.candidates
+        rows = table[table["fix"] == fix]
+        if len(rows):
+            out = rows.loc[:, list(CANDIDATE_COLUMNS)].sort_values("distance_m", kind="stable")
+            return out.reset_index(drop=True)
+    p = result.points
+    config = MatchConfig()
+    x, y = net.project(p.raw_lon[fix : fix + 1], p.raw_lat[fix : fix + 1])
+    hits = net.nearby_edges(x, y, config.search_radius_m, max_per_point=config.max_candidates)
+    edge = np.asarray(hits.edge, dtype=np.int64)
+    u, v, key = net.edge_osm_ids(edge)
+    lon, lat = net.unproject(np.asarray(hits.x), np.asarray(hits.y))
+    nan = np.full(len(edge), math.nan)
+    return pd.DataFrame(
+        {
+            "fix": np.full(len(edge), fix, dtype=np.int64),
+            "edge": edge,
+            "u": u,
+            "v": v,
+            "key": key,
+            "lon": lon,
+            "lat": lat,
+            "distance_m": np.asarray(hits.distance_m),
+            "log_emission": nan,
+            "log_transition": nan,
+            "posterior": nan,
+            "chosen": bool(p.matched[fix]) & (edge == p.edge[fix]),
+        }
+    )
+
+
+def confidence_colour(confidence: float) -> str:
+    """
+    Hex colour of a confidence in 0..1 (red, amber, green); grey for NaN.
+
+    Examples
+    --------
+    >>> confidence_colour(0.0), confidence_colour(1.0), confidence_colour(float("nan"))
+    ('#d7191c', '#1a9641', '#808080')
+    """
+    if not math.isfinite(confidence):
+        return "#808080"
+    c = min(max(confidence, 0.0), 1.0) * (len(CONFIDENCE_COLOURS) - 1)
+    i = min(int(c), len(CONFIDENCE_COLOURS) - 2)
+    t = c - i
+    lo, hi = _rgb(CONFIDENCE_COLOURS[i]), _rgb(CONFIDENCE_COLOURS[i + 1])
+    mixed = (round(a + t * (b - a)) for a, b in zip(lo, hi, strict=True))
+    return "#" + "".join(f"{channel:02x}" for channel in mixed)
+
+
+def _rgb(colour: str) -> tuple[int, int, int]:
+    return int(colour[1:3], 16), int(colour[3:5], 16), int(colour[5:7], 16)
+
+
+def _edge_label(net: RoadNetwork, edge: int) -> str:
+    from roadnets import ROAD_CLASSES
+
+    a = net.arrays
+    way = int(a.edge_way_id[edge])
+    name = net.way_names.get(way, "")
+    road_class = ROAD_CLASSES[int(a.edge_class[edge])]
+    named = f" {name}" if name else ""
+    return f"edge {edge} (way {way}{named}, {road_class})"

@@ -1,0 +1,186 @@
+"""A static (matplotlib) figure of a match, for reports and the README."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from mapmatch.viz.data import (
+    CONFIDENCE_COLOURS,
+    SEGMENT_COLOURS,
+    candidate_table,
+    confidence_colour,
+    edge_line,
+    matched_edge_lines,
+    network_lines,
+    trace_box_m,
+)
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+    from mapmatch.result import MatchResult
+    from roadnets import RoadNetwork
+
+__all__ = ["match_figure"]
+
+_INSTALL_HINT = "mapmatch.viz needs folium and matplotlib: pip install mapmatch[viz]"
+
+
+def match_figure(
+    result: MatchResult,
+    net: RoadNetwork,
+    *,
+    ax: Axes | None = None,
+    candidates_of: int | None = None,
+    margin_m: float = 150.0,
+) -> Figure:
+    """
+    Draw a match as a static figure, the same layers as :func:`mapmatch.viz.match_map`.
+
+    Artists carry labels so a legend (and a test) can find them: ``road network``,
+    ``matched path`` (one line collection per segment, ``matched path, segment <n>``),
+    ``raw points``, ``snapped points`` (coloured by confidence, with a colour bar),
+    ``breaks`` and, with ``candidates_of``, ``candidates``. Axes are lon/lat degrees with
+    the aspect set so that a metre is as long east-west as north-south.
+
+    Parameters
+    ----------
+    result
+        A match result.
+    net
+        The network the trace was matched on.
+    ax
+        Axes to draw on; a new figure otherwise.
+    candidates_of
+        Index of a fix whose candidate edges to draw, coloured by posterior.
+    margin_m
+        Metres of road network drawn around the trace's bounding box.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure drawn on.
+
+    Raises
+    ------
+    ImportError
+        matplotlib is not installed (``pip install mapmatch[viz]``).
+    """
+    try:
+        import matplotlib.pyplot as plt
+        from matplotlib.collections import LineCollection
+        from matplotlib.colors import LinearSegmentedColormap
+        from matplotlib.figure import Figure
+    except ImportError as exc:
+        raise ImportError(_INSTALL_HINT) from exc
+
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8, 8), layout="constrained")
+    parent = ax.get_figure()
+    figure = parent.figure if parent is not None else None
+    if not isinstance(figure, Figure):  # pragma: no cover - axes always belong to a figure
+        msg = "ax does not belong to a figure"
+        raise ValueError(msg)
+    box = trace_box_m(result, net, margin_m=margin_m)
+    roads = [np.column_stack((ln.lon, ln.lat)) for ln in network_lines(net, box)]
+    ax.add_collection(
+        LineCollection(roads, colors="#bdbdbd", linewidths=2.0, label="road network", zorder=1)
+    )
+    for s, lines in enumerate(matched_edge_lines(result, net)):
+        ax.add_collection(
+            LineCollection(
+                [np.column_stack((ln.lon, ln.lat)) for ln in lines],
+                colors=SEGMENT_COLOURS[s % len(SEGMENT_COLOURS)],
+                linewidths=4.0,
+                alpha=0.75,
+                label=f"matched path, segment {s}",
+                zorder=2,
+            )
+        )
+
+    p = result.points
+    m = p.matched
+    ax.scatter(
+        p.raw_lon[m], p.raw_lat[m], s=10, c="#000000", marker="o", label="raw points", zorder=4
+    )
+    if (~m).any():
+        ax.scatter(
+            p.raw_lon[~m],
+            p.raw_lat[~m],
+            s=30,
+            c="#d7191c",
+            marker="x",
+            label="raw points, not matched",
+            zorder=4,
+        )
+    links = [[(p.raw_lon[i], p.raw_lat[i]), (p.lon[i], p.lat[i])] for i in np.flatnonzero(m)]
+    ax.add_collection(
+        LineCollection(links, colors="#555555", linewidths=0.5, linestyles=":", zorder=3)
+    )
+    cmap = LinearSegmentedColormap.from_list("confidence", list(CONFIDENCE_COLOURS))
+    snapped = ax.scatter(
+        p.lon[m],
+        p.lat[m],
+        s=28,
+        c=p.confidence[m],
+        cmap=cmap,
+        vmin=0.0,
+        vmax=1.0,
+        edgecolors="#333333",
+        linewidths=0.5,
+        label="snapped points",
+        zorder=5,
+    )
+    figure.colorbar(snapped, ax=ax, shrink=0.6, label="confidence")
+
+    if result.breaks:
+        b = np.asarray(result.breaks)
+        ax.scatter(
+            p.lon[b],
+            p.lat[b],
+            s=260,
+            facecolors="none",
+            edgecolors="#d7191c",
+            linewidths=2.0,
+            label="breaks",
+            zorder=6,
+        )
+
+    if candidates_of is not None:
+        table = candidate_table(result, net, candidates_of)
+        edges = [np.column_stack(edge_line(net, int(e))) for e in table["edge"]]
+        colours = [confidence_colour(float(c)) for c in table["posterior"]]
+        widths = [5.0 if c else 2.5 for c in table["chosen"]]
+        ax.add_collection(
+            LineCollection(edges, colors=colours, linewidths=widths, label="candidates", zorder=3)
+        )
+        fix = candidates_of % len(p.time_s)
+        ax.scatter(
+            [p.raw_lon[fix]],
+            [p.raw_lat[fix]],
+            s=160,
+            facecolors="none",
+            edgecolors="#000000",
+            linewidths=2.0,
+            label=f"fix {fix}",
+            zorder=6,
+        )
+
+    lon0, lat0 = net.unproject(np.array([box[0]]), np.array([box[1]]))
+    lon1, lat1 = net.unproject(np.array([box[2]]), np.array([box[3]]))
+    ax.set_xlim(float(lon0[0]), float(lon1[0]))
+    ax.set_ylim(float(lat0[0]), float(lat1[0]))
+    ax.set_aspect(1.0 / math.cos(math.radians(0.5 * float(lat0[0] + lat1[0]))))
+    ax.set_xlabel("longitude (deg)")
+    ax.set_ylabel("latitude (deg)")
+    check = result.distance_check
+    ax.set_title(
+        f"{result.trace_id}: {result.matched_length_m:.0f} m matched, "
+        f"{len(result.segments)} segment(s), distance check {check.verdict}"
+    )
+    ax.legend(loc="upper left", fontsize="small", framealpha=0.8)
+    return figure
