@@ -107,6 +107,16 @@ def match_figure(
     ax.scatter(
         p.raw_lon[m], p.raw_lat[m], s=10, c="#000000", marker="o", label="raw points", zorder=4
     )
+    if p.outlier.any():
+        ax.scatter(
+            p.raw_lon[p.outlier],
+            p.raw_lat[p.outlier],
+            s=22,
+            c="#d7191c",
+            marker="o",
+            label="raw points, outliers",
+            zorder=4,
+        )
     if (~m).any():
         ax.scatter(
             p.raw_lon[~m],
