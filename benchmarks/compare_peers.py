@@ -366,7 +366,7 @@ def main(argv: list[str] | None = None) -> int:
             skipped[n] = why
             print(f"[compare_peers] skipping {n}: {why}", flush=True)
     stamp = dt.datetime.now(dt.UTC).strftime("%Y%m%dT%H%M%SZ")
-    out = a.out or ROOT / ".bench" / "peers" / stamp
+    out = (a.out or ROOT / ".bench" / "peers" / stamp).resolve()
     out.mkdir(parents=True, exist_ok=True)
     use_mapmatch = not a.interim and simulate_available()
     if not use_mapmatch:
