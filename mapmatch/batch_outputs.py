@@ -1,0 +1,380 @@
+"""
+Output side of batch matching: per-trace files written atomically, and ``summary.csv``.
+
+Per trace, in the output folder:
+
+``geojson``
+    ``<name>.geojson``: the FeatureCollection of :meth:`MatchResult.to_geojson` (DESIGN.md).
+``csv`` / ``parquet``
+    ``<name>.csv|parquet``: the per-point table of :meth:`MatchResult.to_dataframe`, and
+    ``<name>.edges.csv|parquet``: one row per matched edge, segments in order.
+
+Every file is written to a hidden temporary file in the same folder and renamed into place
+(``os.replace``), so a file under its final name is always complete. The sidecar is renamed
+first and the main file last: a trace's outputs are complete exactly when its main file
+exists (:func:`outputs_complete`).
+
+``summary.csv`` has one row per trace (and one per unreadable file). While a batch runs, rows
+are appended and flushed one by one (:class:`SummaryLog`); a line without its final newline
+(a run killed mid-write) is ignored by :func:`read_summary`. At the end the file is rewritten
+atomically in input order.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import io
+import json
+import math
+import os
+import tempfile
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Iterable
+
+    import pandas as pd
+
+    from mapmatch.result import MatchResult
+
+__all__ = [
+    "FORMATS",
+    "SUMMARY_NAME",
+    "SummaryLog",
+    "SummaryRow",
+    "atomic_write",
+    "edges_dataframe",
+    "output_paths",
+    "outputs_complete",
+    "read_summary",
+    "remove_temporaries",
+    "write_result",
+    "write_summary",
+]
+
+#: Output formats of a batch.
+FORMATS = ("geojson", "csv", "parquet")
+#: File name of the per-trace summary in the output folder.
+SUMMARY_NAME = "summary.csv"
+_TMP_PREFIX = ".tmp-"
+
+
+@dataclass(frozen=True, slots=True)
+class SummaryRow:
+    """
+    One line of ``summary.csv``: a trace's outcome, or an unreadable file's.
+
+    Attributes
+    ----------
+    trace_id
+        The trace's id; empty for a file that could not be read.
+    source
+        The input file as given on the command line (``-`` for standard input).
+    index
+        0-based position of the trace in its file; -1 for an unreadable file.
+    output
+        Output name (without suffix) in the output folder; empty when nothing was written.
+    status
+        ``ok`` or ``failed``.
+    points, matched_points, breaks
+        Fixes in the trace, fixes matched, and breaks where the trace was split.
+    matched_length_m, fused_length_m, relative_error
+        The distance check (NaN when unknown).
+    verdict
+        ``pass``, ``over``, ``under``, ``incomplete``; empty when failed.
+    seconds
+        Wall time spent on the trace (reading, matching, writing).
+    error
+        ``ErrorClass: first line of the message`` when failed, else empty.
+    """
+
+    trace_id: str
+    source: str
+    index: int
+    output: str
+    status: str
+    points: int
+    matched_points: int
+    breaks: int
+    matched_length_m: float
+    fused_length_m: float
+    relative_error: float
+    verdict: str
+    seconds: float
+    error: str
+
+    @property
+    def ok(self) -> bool:
+        """Whether the trace was matched and written."""
+        return self.status == "ok"
+
+    @property
+    def key(self) -> tuple[str, int, str]:
+        """``(source, index, trace_id)``: identifies the trace across runs."""
+        return (self.source, self.index, self.trace_id)
+
+    @classmethod
+    def failed(
+        cls, *, source: str, error: str, trace_id: str = "", index: int = -1, points: int = 0
+    ) -> SummaryRow:
+        """A row for a trace or file that failed with ``error``."""
+        nan = float("nan")
+        return cls(
+            trace_id=trace_id,
+            source=source,
+            index=index,
+            output="",
+            status="failed",
+            points=points,
+            matched_points=0,
+            breaks=0,
+            matched_length_m=nan,
+            fused_length_m=nan,
+            relative_error=nan,
+            verdict="",
+            seconds=0.0,
+            error=error,
+        )
+
+    def to_csv_values(self) -> list[str]:
+        """The row's cells as ``summary.csv`` writes them (no line breaks inside)."""
+        out: list[str] = []
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, float):
+                if math.isnan(value):
+                    text = ""
+                elif f.name == "seconds":
+                    text = f"{value:.3f}"
+                else:
+                    text = f"{value:.10g}"
+            else:
+                text = str(value)
+            out.append(text.replace("\r", " ").replace("\n", " "))
+        return out
+
+    @classmethod
+    def from_csv_values(cls, values: list[str]) -> SummaryRow:
+        """Parse the cells written by :meth:`to_csv_values`; raises ``ValueError``."""
+        names = [f.name for f in fields(cls)]
+        if len(values) != len(names):
+            msg = f"summary row has {len(values)} cells, expected {len(names)}"
+            raise ValueError(msg)
+        raw = dict(zip(names, values, strict=True))
+        kwargs: dict[str, Any] = {}
+        for f in fields(cls):
+            text = raw[f.name]
+            if f.type == "int":
+                kwargs[f.name] = int(text)
+            elif f.type == "float":
+                kwargs[f.name] = float(text) if text else float("nan")
+            else:
+                kwargs[f.name] = text
+        return cls(**kwargs)
+
+    def to_dict(self) -> dict[str, object]:
+        """The row as a plain dictionary."""
+        return asdict(self)
+
+
+SUMMARY_COLUMNS = tuple(f.name for f in fields(SummaryRow))
+
+
+def output_paths(out_dir: Path, name: str, fmt: str) -> tuple[Path, ...]:
+    """
+    The files of one trace, main file last.
+
+    Examples
+    --------
+    >>> [p.name for p in output_paths(Path("out"), "bus-1", "csv")]
+    ['bus-1.edges.csv', 'bus-1.csv']
+    >>> [p.name for p in output_paths(Path("out"), "bus-1", "geojson")]
+    ['bus-1.geojson']
+    """
+    if fmt == "geojson":
+        return (out_dir / f"{name}.geojson",)
+    if fmt in ("csv", "parquet"):
+        return (out_dir / f"{name}.edges.{fmt}", out_dir / f"{name}.{fmt}")
+    msg = f"unknown output format {fmt!r}; use one of {', '.join(FORMATS)}"
+    raise ValueError(msg)
+
+
+def outputs_complete(out_dir: Path, name: str, fmt: str) -> bool:
+    """Whether every file of a trace exists under its final name (so is complete)."""
+    return bool(name) and all(p.is_file() for p in output_paths(out_dir, name, fmt))
+
+
+def atomic_write(path: Path, write: Callable[[Path], object]) -> None:
+    """
+    Write a file through a hidden temporary sibling, then rename it into place.
+
+    Parameters
+    ----------
+    path
+        Final file name.
+    write
+        Called with the temporary path; must create that file.
+    """
+    fd, tmp_name = tempfile.mkstemp(prefix=f"{_TMP_PREFIX}{path.name}.", dir=path.parent)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+
+
+def remove_temporaries(out_dir: Path) -> int:
+    """Delete temporary files a killed run left in ``out_dir``; return how many."""
+    removed = 0
+    for tmp in out_dir.glob(f"{_TMP_PREFIX}*"):
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+            removed += 1
+    return removed
+
+
+def edges_dataframe(result: MatchResult) -> pd.DataFrame:
+    """
+    One row per matched edge: trace, segment, order, OSM ids, length and offsets.
+
+    ``osm_way_ids`` holds the way ids joined by ``;`` (one edge may follow several ways).
+    """
+    import pandas as pd
+
+    rows: list[dict[str, object]] = []
+    for seg in result.segments:
+        for order, edge in enumerate(seg.edges):
+            rows.append(
+                {
+                    "trace_id": result.trace_id,
+                    "segment": seg.index,
+                    "order": order,
+                    "first_point": seg.first,
+                    "last_point": seg.last,
+                    "u": int(edge.u),
+                    "v": int(edge.v),
+                    "key": int(edge.key),
+                    "osm_way_ids": ";".join(str(w) for w in edge.osm_way_ids),
+                    "length_m": float(edge.length_m),
+                    "start_offset_m": float(edge.start_offset_m),
+                    "end_offset_m": float(edge.end_offset_m),
+                }
+            )
+    columns = [
+        "trace_id",
+        "segment",
+        "order",
+        "first_point",
+        "last_point",
+        "u",
+        "v",
+        "key",
+        "osm_way_ids",
+        "length_m",
+        "start_offset_m",
+        "end_offset_m",
+    ]
+    return pd.DataFrame(rows, columns=columns)
+
+
+def write_result(result: MatchResult, out_dir: Path, name: str, fmt: str) -> None:
+    """
+    Write one trace's outputs atomically (sidecar first, main file last).
+
+    Parameters
+    ----------
+    result
+        The match.
+    out_dir
+        Output folder (exists).
+    name
+        Output name without suffix (from :func:`~mapmatch.batch_inputs.assign_output_names`).
+    fmt
+        ``geojson``, ``csv`` or ``parquet``.
+    """
+    paths = output_paths(out_dir, name, fmt)
+    if fmt == "geojson":
+        text = json.dumps(result.to_geojson(), allow_nan=False, separators=(",", ":"))
+        atomic_write(paths[0], lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
+        return
+    edges = edges_dataframe(result)
+    points = result.to_dataframe()
+    if fmt == "csv":
+        atomic_write(paths[0], lambda tmp: edges.to_csv(tmp, index=False))
+        atomic_write(paths[1], lambda tmp: points.to_csv(tmp, index=False))
+    else:
+        atomic_write(paths[0], lambda tmp: edges.to_parquet(tmp, index=False))
+        atomic_write(paths[1], lambda tmp: points.to_parquet(tmp, index=False))
+
+
+def _row_line(row: SummaryRow) -> str:
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerow(row.to_csv_values())
+    return buf.getvalue()
+
+
+def _header_line() -> str:
+    return ",".join(SUMMARY_COLUMNS) + "\n"
+
+
+def read_summary(path: Path) -> list[SummaryRow]:
+    """
+    The complete rows of a ``summary.csv``; a torn last line or a foreign row is skipped.
+
+    Returns an empty list when the file does not exist or has another header.
+    """
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return []
+    if not text.endswith("\n"):
+        text = text[: text.rfind("\n") + 1]  # drop a line cut short by a kill
+    lines = list(csv.reader(io.StringIO(text)))
+    if not lines or tuple(lines[0]) != SUMMARY_COLUMNS:
+        return []
+    rows: list[SummaryRow] = []
+    for values in lines[1:]:
+        with contextlib.suppress(ValueError):
+            rows.append(SummaryRow.from_csv_values(values))
+    return rows
+
+
+def write_summary(path: Path, rows: Iterable[SummaryRow]) -> None:
+    """Write ``summary.csv`` atomically with the given rows."""
+    text = _header_line() + "".join(_row_line(r) for r in rows)
+    atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+
+
+class SummaryLog:
+    """
+    Appends rows to ``summary.csv`` as traces finish, each flushed at once.
+
+    Parameters
+    ----------
+    path
+        The summary file; rewritten (atomically) with ``keep`` first.
+    keep
+        Rows of an earlier run to keep (``--resume``).
+    """
+
+    def __init__(self, path: Path, keep: Iterable[SummaryRow] = ()) -> None:
+        self.path = path
+        write_summary(path, keep)
+        self._handle = path.open("a", encoding="utf-8", newline="")
+
+    def append(self, rows: Iterable[SummaryRow]) -> None:
+        """Append rows and flush them to the operating system."""
+        for row in rows:
+            self._handle.write(_row_line(row))
+        self._handle.flush()
+
+    def close(self) -> None:
+        """Close the file."""
+        self._handle.close()

@@ -1,0 +1,302 @@
+"""
+``mapmatch match INPUT... --out DIR``: batch matching of trace files, locally or on Dask.
+
+Examples::
+
+    mapmatch match traces/ --out matched/ --format geojson
+    mapmatch match day1.csv day2.gpx --network city.osm.pbf --out out/ --workers 4
+    mapmatch fuse raw.csv | mapmatch match - --out out/
+    mapmatch match traces/ --out out/ --scheduler tcp://10.0.0.5:8786 --resume
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from mapmatch.batch import BatchOptions, BatchReport, run_batch
+from mapmatch.batch_outputs import FORMATS, SUMMARY_NAME
+from mapmatch.config import MatchConfig
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from tqdm import tqdm
+
+    from mapmatch.batch_outputs import SummaryRow
+
+__all__ = ["add_parser", "main", "run"]
+
+#: Command-line flags that set :class:`~mapmatch.MatchConfig` fields: flag -> (field, type).
+CONFIG_FLAGS: dict[str, tuple[str, type]] = {
+    "--search-radius-m": ("search_radius_m", float),
+    "--max-candidates": ("max_candidates", int),
+    "--sigma-m": ("sigma_m", float),
+    "--heading-sigma-deg": ("heading_sigma_deg", float),
+    "--beta-m": ("beta_m", float),
+    "--beta-per-s": ("beta_per_s", float),
+    "--uturn-penalty": ("uturn_penalty", float),
+}
+_SHOW_FAILED = 5
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        msg = f"must be a whole number >= 1 (got {text!r})"
+        raise argparse.ArgumentTypeError(msg)
+    return value
+
+
+def _band(text: str) -> tuple[float, float]:
+    try:
+        low, high = (float(v) for v in text.split(","))
+    except ValueError:
+        msg = f"must be LOW,HIGH fractions such as -0.04,0.01 (got {text!r})"
+        raise argparse.ArgumentTypeError(msg) from None
+    return low, high
+
+
+def add_parser(subparsers: argparse._SubParsersAction[Any]) -> argparse.ArgumentParser:
+    """
+    Register the ``match`` sub-command.
+
+    Parameters
+    ----------
+    subparsers
+        The object returned by ``ArgumentParser.add_subparsers()``.
+    """
+    defaults = MatchConfig()
+    p: argparse.ArgumentParser = subparsers.add_parser(
+        "match",
+        help="match trace files or folders; one output per trace plus summary.csv",
+        description=(
+            "Match every trace of the INPUT files and folders (CSV, GPX, GeoJSON, Parquet; "
+            "folders searched recursively; - reads CSV from standard input) and write one "
+            "file per trace, named by its trace id, plus summary.csv with one row per trace. "
+            "Runs on all local cores, or on a Dask cluster with --scheduler. A bad file or "
+            "trace is recorded in summary.csv and the batch goes on. Exit code 0 when every "
+            "trace matched, 1 when any failed, 2 for usage errors."
+        ),
+    )
+    p.add_argument("inputs", nargs="+", metavar="INPUT", help="trace file, folder, or -")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
+    p.add_argument(
+        "--network",
+        metavar="PATH",
+        default=None,
+        help="OSM extract (.osm, .osm.bz2, .osm.pbf); default: the embedded network",
+    )
+    p.add_argument(
+        "--cache-dir",
+        metavar="DIR",
+        default=None,
+        help="compiled-network cache shared by the workers (default $MAPMATCH_CACHE_DIR "
+        "or ~/.cache/mapmatch); must be reachable by Dask workers",
+    )
+    p.add_argument(
+        "--format",
+        choices=FORMATS,
+        default="geojson",
+        help="geojson (DESIGN.md schema), or csv/parquet: per-point table plus "
+        "<id>.edges.csv|parquet (default geojson)",
+    )
+    where = p.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help="local worker processes (default: one per core; 1 runs in this process)",
+    )
+    where.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        default=None,
+        help="run on an existing Dask cluster, e.g. tcp://host:8786 (workers must see "
+        "the same files)",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="skip traces whose outputs in --out are complete from an earlier run",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
+    p.add_argument(
+        "--chunk-traces",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help="traces per task (default: about four tasks per worker, at most 32)",
+    )
+    opts = p.add_argument_group("matcher options (MatchConfig fields)")
+    for flag, (name, kind) in CONFIG_FLAGS.items():
+        opts.add_argument(
+            flag,
+            type=kind,
+            default=None,
+            metavar="X",
+            help=f"{name} (default {getattr(defaults, name)})",
+        )
+    opts.add_argument(
+        "--distance-band",
+        type=_band,
+        default=None,
+        metavar="LOW,HIGH",
+        help=f"distance check pass band, fractions (default {defaults.distance_band[0]:g},"
+        f"{defaults.distance_band[1]:g})",
+    )
+    opts.add_argument(
+        "--no-travel",
+        action="store_true",
+        help="ignore odometer/speed travel distances in the transition (use_travel=False)",
+    )
+    p.set_defaults(run=run)
+    return p
+
+
+def config_from_args(args: argparse.Namespace) -> MatchConfig:
+    """
+    The :class:`~mapmatch.MatchConfig` the flags ask for.
+
+    Raises
+    ------
+    ConfigError
+        A value breaks its rule (the message names the field).
+    """
+    overrides: dict[str, object] = {}
+    for flag, (name, _kind) in CONFIG_FLAGS.items():
+        value = getattr(args, flag[2:].replace("-", "_"))
+        if value is not None:
+            overrides[name] = value
+    if args.distance_band is not None:
+        overrides["distance_band"] = args.distance_band
+    if args.no_travel:
+        overrides["use_travel"] = False
+    return MatchConfig().replace(overrides)
+
+
+class _Bar:
+    """A tqdm progress bar: traces done/total, points/s, ETA."""
+
+    def __init__(self) -> None:
+        self._bar: tqdm[Any] | None = None
+        self._points = 0
+        self._failed = 0
+
+    def start(self, *, total_traces: int, total_points: int, resumed: int) -> None:
+        from tqdm import tqdm
+
+        self._bar = tqdm(
+            total=total_traces,
+            initial=resumed,
+            unit="trace",
+            desc="matching",
+            file=sys.stderr,
+            dynamic_ncols=True,
+        )
+
+    def update(self, rows: Sequence[SummaryRow]) -> None:
+        if self._bar is None:
+            return
+        self._points += sum(r.points for r in rows)
+        self._failed += sum(1 for r in rows if not r.ok)
+        elapsed = max(self._bar.format_dict.get("elapsed", 0.0), 1e-9)
+        self._bar.set_postfix(
+            points_s=f"{self._points / elapsed:,.0f}", failed=self._failed, refresh=False
+        )
+        self._bar.update(len(rows))
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+
+
+def _human_summary(report: BatchReport) -> str:
+    rows = report.rows
+    files = len({r.source for r in rows})
+    failed = [r for r in rows if not r.ok]
+    rate = report.points / report.seconds if report.seconds > 0 else 0.0
+    verdicts = ", ".join(f"{k} {v}" for k, v in report.verdicts.items()) or "none"
+    resumed = f" ({report.resumed} from an earlier run)" if report.resumed else ""
+    lines = [
+        f"traces    {report.traces_ok} ok, {len(failed)} failed, from {files} file(s){resumed}",
+        f"points    {report.points:,} matched traces' points",
+        f"length    {report.matched_length_m / 1000:,.3f} km matched",
+        f"verdicts  {verdicts}",
+        f"time      {report.seconds:.2f} s, {rate:,.0f} points/s on {report.executor}",
+        f"output    {report.out_dir} ({SUMMARY_NAME})",
+    ]
+    for r in failed[:_SHOW_FAILED]:
+        what = f"{r.source} trace {r.trace_id!r}" if r.trace_id else r.source
+        lines.append(f"failed    {what}: {r.error}")
+    if len(failed) > _SHOW_FAILED:
+        lines.append(f"failed    ... and {len(failed) - _SHOW_FAILED} more, see {SUMMARY_NAME}")
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    """
+    Execute ``mapmatch match``; returns 0 when every trace matched, 1 when any failed.
+
+    Usage errors (missing input, bad option value, unreachable scheduler, network that
+    cannot be loaded) raise the project's errors, which the caller prints with exit code 2.
+    """
+    config = config_from_args(args)
+    verbose = bool(getattr(args, "verbose", False))
+    options = BatchOptions(
+        inputs=tuple(args.inputs),
+        out_dir=Path(args.out),
+        network=args.network,
+        cache_dir=args.cache_dir,
+        format=args.format,
+        config=config,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        resume=args.resume,
+        chunk_traces=args.chunk_traces,
+        log_level=logging.WARNING if verbose else logging.ERROR,
+    )
+    show_bar = not args.quiet and sys.stderr.isatty()
+    bar = _Bar() if show_bar else None
+    try:
+        report = run_batch(options, progress=bar)
+    finally:
+        if bar is not None:
+            bar.close()
+    if not args.quiet:
+        print(_human_summary(report))
+    return report.exit_code
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """
+    Run ``match`` alone (``python -m mapmatch.cli.match ...``), as ``mapmatch match`` does.
+
+    Errors the project raises on purpose print as one line with exit code 2.
+    """
+    from roadnets.errors import MapMatchError
+
+    parser = argparse.ArgumentParser(prog="mapmatch")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    add_parser(sub)
+    args = parser.parse_args(["match", *(sys.argv[1:] if argv is None else argv)])
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return int(args.run(args))
+    except MapMatchError as exc:
+        print(f"mapmatch: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("mapmatch: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
