@@ -185,6 +185,7 @@ def match_figure(
     ax.set_xlim(float(lon0[0]), float(lon1[0]))
     ax.set_ylim(float(lat0[0]), float(lat1[0]))
     ax.set_aspect(1.0 / math.cos(math.radians(0.5 * float(lat0[0] + lat1[0]))))
+    ax.ticklabel_format(useOffset=False)
     ax.set_xlabel("longitude (deg)")
     ax.set_ylabel("latitude (deg)")
     check = result.distance_check
