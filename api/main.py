@@ -1,0 +1,172 @@
+"""
+The FastAPI application (``uvicorn api.main:app``, or ``mapmatch serve``).
+
+:func:`create_app` builds an app from :class:`~api.settings.Settings`; the module-level
+``app`` reads them from the ``MAPMATCH_*`` environment when this module is imported, which is
+how ``mapmatch serve`` hands its command-line options to every worker process.
+
+Startup is fast: the server accepts connections at once and loads the networks in a thread;
+``/healthz`` answers 200 from the start, ``/readyz`` and ``/v1/match`` 503 ``not_ready`` until
+the networks are loaded and warmed up.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+from contextlib import asynccontextmanager
+from typing import TYPE_CHECKING, Any
+
+from fastapi import FastAPI
+from fastapi.exceptions import RequestValidationError
+from fastapi.openapi.utils import get_openapi
+from fastapi.responses import Response
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from api.errors import HTTP_CODES, error_answer, error_body
+from api.logs import configure_logging
+from api.metrics import ServiceMetrics
+from api.middleware import SCOPE_KEY, ServiceMiddleware
+from api.networks import NetworkRegistry
+from api.routes import router
+from api.schemas import MatchRequest
+from api.service import MatchService, validation_error
+from api.settings import Settings
+from roadnets.errors import MapMatchError
+
+if TYPE_CHECKING:
+    from collections.abc import AsyncIterator
+
+    from fastapi import Request
+
+__all__ = ["app", "create_app"]
+
+_log = logging.getLogger("api")
+
+_DESCRIPTION = """
+Match vehicle traces onto OpenStreetMap roads (HMM map matching) and check the matched length
+against the vehicle's own trip distance.
+
+Every error answers `{"error": {"code", "message", "field"?, "rows"?}}`; `code` is stable.
+When the server runs with a token, every route but `/healthz` needs
+`Authorization: Bearer <token>`.
+"""
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """
+    Build the service's app.
+
+    Parameters
+    ----------
+    settings
+        Deployment settings; default: read from the ``MAPMATCH_*`` environment.
+
+    Returns
+    -------
+    FastAPI
+        The app; its networks load in a thread when it starts (ASGI lifespan).
+    """
+    settings = settings or Settings()
+    configure_logging()
+    networks = NetworkRegistry(settings.networks, settings.cache_dir)
+    service = MatchService(networks, settings)
+    metrics = ServiceMetrics()
+
+    @asynccontextmanager
+    async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
+        loading = asyncio.ensure_future(asyncio.to_thread(networks.load_all))
+        try:
+            yield
+        finally:
+            service.runner.shutdown()
+            if loading.done() and not loading.cancelled() and loading.exception() is not None:
+                _log.error("network loading crashed", exc_info=loading.exception())
+
+    app = FastAPI(
+        title="mapmatch",
+        version="1",
+        description=_DESCRIPTION,
+        lifespan=lifespan,
+        docs_url="/docs",
+        redoc_url=None,
+        openapi_url="/openapi.json",
+    )
+    app.state.settings = settings
+    app.state.networks = networks
+    app.state.service = service
+    app.state.metrics = metrics
+    app.include_router(router)
+    app.add_exception_handler(MapMatchError, _project_error)
+    app.add_exception_handler(RequestValidationError, _validation_error)
+    app.add_exception_handler(StarletteHTTPException, _http_error)
+    token = settings.token.get_secret_value() if settings.token else None
+    app.add_middleware(
+        ServiceMiddleware, token=token, metrics=metrics, access_log=settings.access_log
+    )
+    app.openapi = lambda: _openapi(app, secured=token is not None)  # type: ignore[method-assign]
+    return app
+
+
+def _answer(request: Request, exc: BaseException) -> Response:
+    answer = error_answer(exc)
+    info = request.scope.get(SCOPE_KEY)
+    if isinstance(info, dict):
+        info["error"] = answer.code
+    return Response(
+        answer.body,
+        status_code=answer.status,
+        headers=answer.headers,
+        media_type="application/json",
+    )
+
+
+async def _project_error(request: Request, exc: Exception) -> Response:
+    return _answer(request, exc)
+
+
+async def _validation_error(request: Request, exc: Exception) -> Response:
+    assert isinstance(exc, RequestValidationError)
+    return _answer(request, validation_error(list(exc.errors()), prefix=("query",)))
+
+
+async def _http_error(request: Request, exc: Exception) -> Response:
+    assert isinstance(exc, StarletteHTTPException)
+    code = HTTP_CODES.get(exc.status_code, "http_error")
+    info = request.scope.get(SCOPE_KEY)
+    if isinstance(info, dict):
+        info["error"] = code
+    body = error_body(code, str(exc.detail))
+    return Response(
+        json.dumps(body).encode(),
+        status_code=exc.status_code,
+        headers=dict(exc.headers or {}),
+        media_type="application/json",
+    )
+
+
+def _openapi(app: FastAPI, *, secured: bool) -> dict[str, Any]:
+    """The OpenAPI document, with the JSON body model and (with a token) the bearer scheme."""
+    if app.openapi_schema:
+        return app.openapi_schema
+    schema = get_openapi(
+        title=app.title, version=app.version, description=app.description, routes=app.routes
+    )
+    components = schema.setdefault("components", {})
+    models = components.setdefault("schemas", {})
+    body = MatchRequest.model_json_schema(ref_template="#/components/schemas/{model}")
+    for name, definition in body.pop("$defs", {}).items():
+        models.setdefault(name, definition)
+    models["MatchRequest"] = body
+    if secured:
+        components["securitySchemes"] = {
+            "bearerAuth": {"type": "http", "scheme": "bearer", "description": "MAPMATCH_TOKEN"}
+        }
+        schema["security"] = [{"bearerAuth": []}]
+        schema["paths"]["/healthz"]["get"]["security"] = []
+    app.openapi_schema = schema
+    return schema
+
+
+app = create_app()

@@ -1,0 +1,508 @@
+"""
+Request and response models of the HTTP API; every field is documented in OpenAPI.
+
+The request side is validated with these models (bounds included, so a sigma of -1 is a 422
+naming ``options.sigma_m`` before the matcher sees it). The response side documents what
+``MatchResult.to_geojson()`` produces (DESIGN.md "Output"); the service sends that document as
+it is and does not re-validate it, which would cost more than the match for long traces.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal
+
+from pydantic import AliasChoices, BaseModel, ConfigDict, Field, PlainValidator, WithJsonSchema
+
+from mapmatch import OVERRIDABLE, MatchConfig
+
+__all__ = [
+    "DistanceCheckOut",
+    "EdgeOut",
+    "ErrorDetail",
+    "ErrorResponse",
+    "HealthResponse",
+    "MatchOptions",
+    "MatchQuery",
+    "MatchRequest",
+    "MatchResponse",
+    "NetworkOut",
+    "NetworksResponse",
+    "PointFeature",
+    "PointIn",
+    "ReadyResponse",
+    "SegmentFeature",
+]
+
+_DEFAULT = MatchConfig()
+_LOW_BAND, _HIGH_BAND = _DEFAULT.distance_band
+
+
+def _time_value(value: object) -> float | str:
+    """Epoch seconds (a finite number) or a timestamp string; the trace stage parses it."""
+    if isinstance(value, bool) or not isinstance(value, int | float | str):
+        msg = "must be epoch seconds (a number) or an ISO-8601 timestamp (a string)"
+        raise ValueError(msg)  # pydantic turns a ValueError into a 422
+    if isinstance(value, str):
+        if len(value) > 64:
+            msg = "a timestamp string must be at most 64 characters"
+            raise ValueError(msg)
+        return value
+    if not math.isfinite(value):
+        msg = "must be a finite number"
+        raise ValueError(msg)
+    return float(value)
+
+
+TimeValue = Annotated[
+    float | str,
+    PlainValidator(_time_value),
+    WithJsonSchema(
+        {
+            "anyOf": [
+                {"type": "number"},
+                {"type": "string", "format": "date-time", "maxLength": 64},
+            ]
+        }
+    ),
+]
+
+
+def _default(name: str, unit: str = "") -> str:
+    value = getattr(_DEFAULT, name)
+    return f" Server default: {value}{unit}."
+
+
+# --------------------------------------------------------------------------- request
+
+
+class PointIn(BaseModel):
+    """One fix of the trace. Keys not listed here are ignored."""
+
+    model_config = ConfigDict(extra="ignore", populate_by_name=True)
+
+    time: TimeValue = Field(
+        validation_alias=AliasChoices("time", "t", "timestamp"),
+        description=(
+            "Epoch seconds, or an ISO-8601 timestamp (naive = UTC). Aliases `t`, `timestamp`. "
+            "Points out of time order are sorted, and a point repeating an earlier time is "
+            "dropped (the first one kept); both are reported in `stats.warnings`."
+        ),
+        examples=[1700000000.0, "2023-11-14T22:13:20Z"],
+    )
+    lat: float = Field(
+        ge=-90,
+        le=90,
+        allow_inf_nan=False,
+        validation_alias=AliasChoices("lat", "latitude"),
+        description="Latitude, WGS84 degrees (alias `latitude`).",
+        examples=[43.7384],
+    )
+    lon: float = Field(
+        ge=-180,
+        le=180,
+        allow_inf_nan=False,
+        validation_alias=AliasChoices("lon", "lng", "longitude"),
+        description="Longitude, WGS84 degrees (aliases `lng`, `longitude`).",
+        examples=[7.4246],
+    )
+    heading: float | None = Field(
+        default=None,
+        allow_inf_nan=False,
+        validation_alias=AliasChoices("heading", "bearing", "course", "heading_deg"),
+        description=(
+            "Direction of travel, degrees clockwise from north (any value, taken modulo 360); "
+            "null = unknown. Aliases `bearing`, `course`, `heading_deg`."
+        ),
+    )
+    speed: float | None = Field(
+        default=None,
+        ge=0,
+        allow_inf_nan=False,
+        validation_alias=AliasChoices("speed", "speed_mps"),
+        description="Speed over ground, m/s; null = unknown. Alias `speed_mps`.",
+    )
+    accuracy: float | None = Field(
+        default=None,
+        gt=0,
+        allow_inf_nan=False,
+        validation_alias=AliasChoices("accuracy", "accuracy_m"),
+        description=(
+            "1-sigma horizontal position error, metres; widens the fix's search radius and "
+            "replaces sigma_m when larger. null = unknown. Alias `accuracy_m`."
+        ),
+    )
+    hdop: float | None = Field(
+        default=None,
+        gt=0,
+        allow_inf_nan=False,
+        description="Horizontal dilution of precision; fills an unknown accuracy as hdop x 5 m.",
+    )
+    odometer: float | None = Field(
+        default=None,
+        allow_inf_nan=False,
+        validation_alias=AliasChoices("odometer", "odometer_m"),
+        description=(
+            "Cumulative fused distance, metres, never decreasing in time; the distance check "
+            "uses last - first. null = unknown. Alias `odometer_m`."
+        ),
+    )
+
+
+class MatchOptions(BaseModel):
+    """
+    Matcher parameters a request may override (``mapmatch.OVERRIDABLE``); omitted = default.
+
+    The bounds are the matcher's own rules, plus upper bounds the service sets so that one
+    request cannot ask for unbounded work.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    search_radius_m: float | None = Field(
+        default=None,
+        gt=0,
+        le=_DEFAULT.max_search_radius_m,
+        allow_inf_nan=False,
+        description="Roads farther than this from a fix are not considered, metres."
+        + _default("search_radius_m"),
+    )
+    max_candidates: int | None = Field(
+        default=None,
+        ge=1,
+        le=64,
+        description="Candidate directed edges kept per fix." + _default("max_candidates"),
+    )
+    sigma_m: float | None = Field(
+        default=None,
+        gt=0,
+        le=500,
+        allow_inf_nan=False,
+        description="1-sigma position error of a fix, metres." + _default("sigma_m"),
+    )
+    heading_sigma_deg: float | None = Field(
+        default=None,
+        gt=0,
+        le=180,
+        allow_inf_nan=False,
+        description="Spread of the heading around the road direction, degrees."
+        + _default("heading_sigma_deg"),
+    )
+    beta_m: float | None = Field(
+        default=None,
+        gt=0,
+        le=1000,
+        allow_inf_nan=False,
+        description="Scale of |great-circle - route distance| in the transition, metres."
+        + _default("beta_m"),
+    )
+    beta_per_s: float | None = Field(
+        default=None,
+        ge=0,
+        le=100,
+        allow_inf_nan=False,
+        description="Growth of the transition scale per second of sampling interval, m/s."
+        + _default("beta_per_s"),
+    )
+    uturn_penalty: float | None = Field(
+        default=None,
+        ge=0,
+        le=1000,
+        allow_inf_nan=False,
+        description="Cost of a U-turn in the middle of a road, nats." + _default("uturn_penalty"),
+    )
+    use_travel: bool | None = Field(
+        default=None,
+        description="Penalise routes that disagree with the odometer/speed travel."
+        + _default("use_travel"),
+    )
+    standstill_m: float | None = Field(
+        default=None,
+        ge=0,
+        le=1000,
+        allow_inf_nan=False,
+        description="A move backwards along one edge up to this far is a stopped car's noise, m."
+        + _default("standstill_m"),
+    )
+    thinning_sigmas: float | None = Field(
+        default=None,
+        ge=0,
+        le=100,
+        allow_inf_nan=False,
+        description="A fix within this many sigmas of the previous kept fix is left out."
+        + _default("thinning_sigmas"),
+    )
+    outlier_sigmas: float | None = Field(
+        default=None,
+        ge=0,
+        le=100,
+        allow_inf_nan=False,
+        description="A fix this many sigmas from where its neighbours put it is an outlier."
+        + _default("outlier_sigmas"),
+    )
+    distance_band: (
+        tuple[
+            Annotated[float, Field(gt=-1, le=0, allow_inf_nan=False)],
+            Annotated[float, Field(ge=0, lt=10, allow_inf_nan=False)],
+        ]
+        | None
+    ) = Field(
+        default=None,
+        description=(
+            "Pass band [low, high] of the distance check's relative error (fractions, "
+            f"low in (-1, 0], high in [0, 10)). Server default: [{_LOW_BAND}, {_HIGH_BAND}]."
+        ),
+    )
+
+    def overrides(self) -> dict[str, object]:
+        """The options that were given, as ``MatchConfig.replace`` takes them."""
+        return self.model_dump(exclude_none=True)
+
+
+if set(MatchOptions.model_fields) != OVERRIDABLE:  # pragma: no cover - caught at import
+    _msg = f"MatchOptions and mapmatch.OVERRIDABLE differ: {sorted(OVERRIDABLE)}"
+    raise RuntimeError(_msg)
+
+_CRS = Literal["wgs84", "gcj02", "bd09"]
+_CRS_DESCRIPTION = "Frame of the coordinates; GCJ-02 and BD-09 are converted to WGS84."
+_NETWORK_DESCRIPTION = "Id of the network to match on (see GET /v1/networks); default: the first."
+_FUSED_DESCRIPTION = (
+    "Trip distance the vehicle reported, metres; the distance check uses it when the points "
+    "have no odometer."
+)
+
+
+class MatchRequest(BaseModel):
+    """The JSON body of ``POST /v1/match`` (Content-Type ``application/json``)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    points: list[PointIn] = Field(
+        min_length=2,
+        description=(
+            "The fixes, at least 2 with distinct times, at most the server's limit "
+            "(MAPMATCH_MAX_POINTS, 100 000 by default; more is a 413)."
+        ),
+    )
+    trace_id: str = Field(
+        default="trace", min_length=1, max_length=200, description="Name of the trace."
+    )
+    fused_distance_m: float | None = Field(
+        default=None, ge=0, le=1e8, allow_inf_nan=False, description=_FUSED_DESCRIPTION
+    )
+    network: str | None = Field(
+        default=None, min_length=1, max_length=200, description=_NETWORK_DESCRIPTION
+    )
+    crs: _CRS = Field(default="wgs84", description=_CRS_DESCRIPTION)
+    options: MatchOptions | None = Field(
+        default=None, description="Matcher parameters to override for this request."
+    )
+
+
+class MatchQuery(MatchOptions):
+    """
+    Query parameters of ``POST /v1/match``.
+
+    For GPX, CSV and GeoJSON bodies they carry what a JSON body holds in its members; with a
+    JSON body they may be used too, but a member given in both places is a 422.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    network: str | None = Field(
+        default=None, min_length=1, max_length=200, description=_NETWORK_DESCRIPTION
+    )
+    trace_id: str | None = Field(
+        default=None,
+        min_length=1,
+        max_length=200,
+        description="Name of the trace when the body does not name it.",
+    )
+    fused_distance_m: float | None = Field(
+        default=None, ge=0, le=1e8, allow_inf_nan=False, description=_FUSED_DESCRIPTION
+    )
+    crs: _CRS | None = Field(default=None, description=_CRS_DESCRIPTION + " Default wgs84.")
+
+    def options(self) -> dict[str, object]:
+        """The matcher options among the query parameters."""
+        return {k: v for k, v in self.model_dump(exclude_none=True).items() if k in OVERRIDABLE}
+
+
+# --------------------------------------------------------------------------- response
+
+
+class EdgeOut(BaseModel):
+    """One directed edge of a matched path and the stretch of it that was driven."""
+
+    u: int = Field(description="OSM node id where the edge starts.")
+    v: int = Field(description="OSM node id where the edge ends.")
+    key: int = Field(description="Tells parallel edges between u and v apart.")
+    osm_way_ids: list[int] = Field(description="OSM way(s) the edge belongs to.")
+    length_m: float = Field(description="Length of the whole edge, metres.")
+    start_offset_m: float = Field(description="Start of the driven stretch from u, metres.")
+    end_offset_m: float = Field(description="End of the driven stretch from u, metres.")
+
+
+class LineStringGeometry(BaseModel):
+    """GeoJSON LineString in WGS84 [lon, lat]."""
+
+    type: Literal["LineString"]
+    coordinates: list[list[float]] = Field(description="[lon, lat] pairs in driving order.")
+
+
+class PointGeometry(BaseModel):
+    """GeoJSON Point in WGS84 [lon, lat]."""
+
+    type: Literal["Point"]
+    coordinates: list[float] = Field(description="[lon, lat] of the snapped position.")
+
+
+class SegmentProperties(BaseModel):
+    """Properties of a segment Feature."""
+
+    kind: Literal["segment"]
+    segment: int = Field(description="0-based index of the segment.")
+    point_range: list[int] = Field(description="[first, last] point indices it covers.")
+    length_m: float = Field(description="Driven length, metres.")
+    edges: list[EdgeOut] = Field(description="Edges driven, in order.")
+
+
+class SegmentFeature(BaseModel):
+    """A connected matched piece of the trace; a break starts a new one."""
+
+    type: Literal["Feature"]
+    geometry: LineStringGeometry
+    properties: SegmentProperties
+
+
+class PointProperties(BaseModel):
+    """Properties of a point Feature (one per point, after sorting by time)."""
+
+    kind: Literal["point"]
+    index: int = Field(description="0-based index of the point after sorting.")
+    time: float = Field(description="Epoch seconds.")
+    matched: bool = Field(description="Whether the point was placed on a road.")
+    u: int | None = Field(description="OSM node id where the matched edge starts.")
+    v: int | None = Field(description="OSM node id where the matched edge ends.")
+    key: int | None = Field(description="Parallel-edge key of the matched edge.")
+    offset_m: float | None = Field(description="Position along the matched edge, metres.")
+    distance_m: float | None = Field(description="Raw point to its road position, metres.")
+    confidence: float = Field(description="Posterior probability of the chosen road, 0..1.")
+    interpolated: bool = Field(
+        description="Left out of the model (outlier, stopped car) and placed by time."
+    )
+    outlier: bool = Field(description="Judged an outlier.")
+
+
+class PointFeature(BaseModel):
+    """One input point at its snapped position (null geometry when unmatched)."""
+
+    type: Literal["Feature"]
+    geometry: PointGeometry | None
+    properties: PointProperties
+
+
+class DistanceCheckOut(BaseModel):
+    """The fused trip distance held against the matched road length."""
+
+    matched_length_m: float = Field(description="Road distance along the matched path, m.")
+    fused_length_m: float = Field(description="Trip distance the vehicle reported, m.")
+    source: Literal["odometer", "caller", "chord"] = Field(
+        description="odometer (last - first), caller (fused_distance_m) or chord (raw positions)."
+    )
+    relative_error: float | None = Field(
+        description="(fused - matched) / matched; null when the matched length is 0."
+    )
+    band: list[float] = Field(description="[low, high] pass band of relative errors.")
+    verdict: Literal["pass", "over", "under", "incomplete"] = Field(
+        description="pass inside the band; over/under outside; incomplete with breaks or gaps."
+    )
+
+
+class StatsOut(BaseModel):
+    """Counts and timings of the match."""
+
+    points: int = Field(description="Points after sorting and dropping repeated times.")
+    matched_points: int = Field(description="Points placed on a road.")
+    candidates: int = Field(description="Candidate road positions considered.")
+    reordered_rows: int = Field(description="Input points that were out of time order.")
+    duplicate_time_rows: int = Field(description="Input points dropped for a repeated time.")
+    model_points: int = Field(description="Points that entered the HMM.")
+    outliers: int = Field(description="Points judged outliers.")
+    break_repairs: int = Field(description="Breaks repaired by leaving a point out.")
+    timings_s: dict[str, float] = Field(description="Seconds per matching stage.")
+    warnings: list[str] = Field(description="What validation did to the input, one sentence each.")
+
+
+class NetworkRef(BaseModel):
+    """The network matched on."""
+
+    id: str = Field(description="Network id.")
+    source: str = Field(description="OSM extract it was compiled from.")
+    crs: str = Field(description="Metric CRS used internally (EPSG code).")
+
+
+class MatchResponse(BaseModel):
+    """A GeoJSON FeatureCollection: one Feature per segment, then one per point."""
+
+    type: Literal["FeatureCollection"]
+    trace_id: str = Field(description="Name of the trace.")
+    network: NetworkRef
+    matched_length_m: float = Field(description="Metres along the matched path, all segments.")
+    distance_check: DistanceCheckOut
+    breaks: list[int] = Field(description="Point indices where the trace was split.")
+    stats: StatsOut
+    features: list[SegmentFeature | PointFeature] = Field(
+        description="Segment Features first, then one point Feature per point."
+    )
+
+
+class ErrorDetail(BaseModel):
+    """What went wrong."""
+
+    code: str = Field(description="Stable machine-readable code (see the error table).")
+    message: str = Field(description="What is wrong, the offending value, and how to fix it.")
+    field: str | None = Field(
+        default=None, description="Offending field, e.g. points[3].lat, options.sigma_m."
+    )
+    rows: list[int] | None = Field(
+        default=None, description="Offending 0-based points (JSON) or data rows (files)."
+    )
+
+
+class ErrorResponse(BaseModel):
+    """Every 4xx/5xx answer."""
+
+    error: ErrorDetail
+
+
+class NetworkOut(BaseModel):
+    """A network this service matches on."""
+
+    id: str = Field(description="Id to pass as `network`.")
+    source: str = Field(description="File name of the OSM extract.")
+    crs: str = Field(description="Metric CRS used internally.")
+    bbox: list[float] = Field(description="[min_lon, min_lat, max_lon, max_lat], WGS84.")
+    nodes: int = Field(description="Graph nodes.")
+    edges: int = Field(description="Directed edges.")
+    road_km: float = Field(description="Road length, each two-way road counted once, km.")
+    default: bool = Field(description="Used when a request names no network.")
+
+
+class NetworksResponse(BaseModel):
+    """The networks this service matches on."""
+
+    networks: list[NetworkOut]
+
+
+class HealthResponse(BaseModel):
+    """The process is alive."""
+
+    status: Literal["alive"]
+
+
+class ReadyResponse(BaseModel):
+    """Every network is loaded; matches can be served."""
+
+    status: Literal["ready"]
+    networks: list[str] = Field(description="Ids of the loaded networks.")

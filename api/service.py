@@ -1,0 +1,433 @@
+"""
+What ``POST /v1/match`` does apart from HTTP, and the bounded thread pool it runs in.
+
+Read the body, build the trace and the matcher configuration, match, and serialise.
+
+Route handlers stay thin: they read the body (:func:`read_body`) and hand it to
+:meth:`MatchService.submit`, which runs :meth:`MatchService.run` in a match thread under the
+request's time budget.
+
+What "frees its worker" means
+-----------------------------
+A request past its budget is answered at once (504 ``timeout``, or 503 ``overloaded`` when it
+never got a thread) and its event loop is free for other requests. Python cannot stop a running
+thread, though, and the matcher has no cancellation points: the thread finishes the match (its
+result thrown away) and holds its slot of the pool until then. The pool is bounded
+(``MAPMATCH_MATCH_THREADS`` threads, ``MAPMATCH_MAX_QUEUED`` waiting), so runaway requests can
+delay others but never pile up threads without bound; the point and body limits bound how long
+one match can run. While a match thread runs Python code it holds the GIL and slows the other
+requests of its process; numba's routing and Viterbi kernels release it (``nogil``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import threading
+import time
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Final, TypeVar
+
+import numpy as np
+from pydantic import ValidationError
+
+import mapmatch
+from api.errors import (
+    BodyTooLargeError,
+    InvalidJSONError,
+    MatchTimeoutError,
+    OptionError,
+    OverloadedError,
+    RequestFieldError,
+    ServiceError,
+    TooManyPointsError,
+    UnsupportedMediaTypeError,
+)
+from api.schemas import MatchQuery, MatchRequest
+from mapmatch import OVERRIDABLE, ConfigError, InvalidTraceError, MatchConfig, TraceFileError
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Iterable, Mapping, Sequence
+
+    from pydantic_core import ErrorDetails
+    from starlette.requests import Request
+
+    from api.networks import NetworkRegistry
+    from api.schemas import PointIn
+    from api.settings import Settings
+
+__all__ = [
+    "MEDIA_TYPES",
+    "MatchOutcome",
+    "MatchRunner",
+    "MatchService",
+    "body_format",
+    "read_body",
+    "validation_error",
+]
+
+T = TypeVar("T")
+
+#: Content types ``POST /v1/match`` reads, and the trace format of each.
+MEDIA_TYPES: Final[Mapping[str, str]] = {
+    "application/json": "json",
+    "application/geo+json": "geojson",
+    "application/gpx+xml": "gpx",
+    "text/csv": "csv",
+}
+_SHOW: Final = 5  # problems quoted in one message
+_BASE_CONFIG: Final = MatchConfig()
+
+
+@dataclass(frozen=True, slots=True)
+class MatchOutcome:
+    """A finished match: the GeoJSON document as bytes, and figures for logs and metrics."""
+
+    content: bytes
+    trace_id: str
+    network: str
+    points: int
+    matched_points: int
+    breaks: int
+    seconds: float
+
+
+def body_format(content_type: str | None) -> str:
+    """
+    The trace format of a request's Content-Type (parameters such as charset are ignored).
+
+    Raises
+    ------
+    UnsupportedMediaTypeError
+        Any other content type, or none.
+
+    Examples
+    --------
+    >>> body_format("text/csv; charset=utf-8")
+    'csv'
+    """
+    media = (content_type or "").split(";", 1)[0].strip().lower()
+    fmt = MEDIA_TYPES.get(media)
+    if fmt is None:
+        shown = repr(media) if media else "no Content-Type"
+        msg = f"cannot read a body of {shown}; send one of {', '.join(MEDIA_TYPES)}"
+        raise UnsupportedMediaTypeError(msg, field="Content-Type")
+    return fmt
+
+
+async def read_body(request: Request, limit_bytes: int) -> bytes:
+    """
+    The request body, refused as soon as it is known to be over ``limit_bytes``.
+
+    Raises
+    ------
+    BodyTooLargeError
+        Content-Length, or the bytes received so far, exceed the limit.
+    """
+    msg = f"the body is larger than this service accepts ({limit_bytes:,} bytes)"
+    declared = request.headers.get("content-length", "")
+    if declared.isdigit() and int(declared) > limit_bytes:
+        msg = f"{msg}: Content-Length is {int(declared):,}; send less"
+        raise BodyTooLargeError(msg)
+    chunks: list[bytes] = []
+    size = 0
+    async for chunk in request.stream():
+        size += len(chunk)
+        if size > limit_bytes:
+            msg = f"{msg}; send less"
+            raise BodyTooLargeError(msg)
+        chunks.append(chunk)
+    return b"".join(chunks)
+
+
+class MatchRunner:
+    """
+    A bounded pool of match threads; every job runs under a time budget.
+
+    Parameters
+    ----------
+    threads
+        Jobs running at once.
+    max_queued
+        Jobs waiting for a thread; one more is refused at once with :class:`OverloadedError`.
+    budget_s
+        Seconds a job may take from submission (waiting included).
+    """
+
+    def __init__(self, *, threads: int, max_queued: int, budget_s: float) -> None:
+        self._executor = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="match")
+        self._capacity = threads + max_queued
+        self._budget_s = budget_s
+        self._lock = threading.Lock()
+        self._in_system = 0  # queued + running, abandoned ones included
+
+    @property
+    def in_system(self) -> int:
+        """Jobs queued or running, abandoned ones included."""
+        return self._in_system
+
+    async def run(self, fn: Callable[[], T]) -> T:
+        """
+        Run ``fn`` in a match thread and return its result within the budget.
+
+        Raises
+        ------
+        OverloadedError
+            The pool is full, or the job was still waiting for a thread when the budget ran
+            out (it is then never started).
+        MatchTimeoutError
+            The job ran past the budget; its thread finishes it and drops the result.
+        """
+        with self._lock:
+            if self._in_system >= self._capacity:
+                msg = (
+                    f"the service is busy ({self._in_system} matches running or waiting); "
+                    "retry shortly"
+                )
+                raise OverloadedError(msg)
+            self._in_system += 1
+        started = threading.Event()
+
+        def job() -> T:
+            started.set()
+            return fn()
+
+        future = self._executor.submit(job)
+        future.add_done_callback(self._release)
+        try:
+            return await asyncio.wait_for(asyncio.wrap_future(future), timeout=self._budget_s)
+        except TimeoutError:
+            future.cancel()
+            if not started.is_set():
+                msg = (
+                    f"the service is busy: no match thread freed up within the "
+                    f"{self._budget_s:g} s time budget; retry shortly"
+                )
+                raise OverloadedError(msg) from None
+            msg = (
+                f"the match ran past the {self._budget_s:g} s time budget; send a shorter "
+                "trace, or split it"
+            )
+            raise MatchTimeoutError(msg) from None
+
+    def _release(self, _future: Future[T]) -> None:
+        with self._lock:
+            self._in_system -= 1
+
+    def shutdown(self) -> None:
+        """Drop waiting jobs; running ones finish in their threads."""
+        self._executor.shutdown(wait=False, cancel_futures=True)
+
+
+class MatchService:
+    """
+    Turns a request body and its query parameters into a matched GeoJSON document.
+
+    Parameters
+    ----------
+    networks
+        The networks to match on.
+    settings
+        Limits (points, time budget, threads).
+    """
+
+    def __init__(self, networks: NetworkRegistry, settings: Settings) -> None:
+        self.networks = networks
+        self.max_points = settings.max_points
+        self.runner = MatchRunner(
+            threads=settings.match_threads,
+            max_queued=settings.max_queued,
+            budget_s=settings.time_budget_s,
+        )
+
+    async def submit(self, body: bytes, fmt: str, query: MatchQuery) -> MatchOutcome:
+        """:meth:`run` in a match thread, under the time budget."""
+        self.networks.get(query.network)  # answer not_ready / unknown_network before queueing
+        return await self.runner.run(lambda: self.run(body, fmt, query))
+
+    def run(self, body: bytes, fmt: str, query: MatchQuery) -> MatchOutcome:
+        """
+        Parse, match and serialise one trace (blocking; runs in a match thread).
+
+        Parameters
+        ----------
+        body
+            The request body.
+        fmt
+            Its format, from :func:`body_format`.
+        query
+            The query parameters.
+
+        Raises
+        ------
+        MapMatchError
+            Any problem of the request; :mod:`api.errors` maps it to its answer.
+        """
+        started = time.perf_counter()
+        if fmt == "json":
+            trace, network_id, fused_m, overrides = self._from_json(body, query)
+        else:
+            trace = self._from_file(body, fmt, query)
+            network_id, fused_m, overrides = query.network, query.fused_distance_m, query.options()
+        net = self.networks.get(network_id)
+        config = _config(overrides)
+        result = mapmatch.match(trace, net, config, fused_distance_m=fused_m)
+        content = json.dumps(result.to_geojson(), allow_nan=False, separators=(",", ":"))
+        return MatchOutcome(
+            content=content.encode(),
+            trace_id=result.trace_id,
+            network=net.network_id,
+            points=result.stats.points,
+            matched_points=result.stats.matched_points,
+            breaks=len(result.breaks),
+            seconds=time.perf_counter() - started,
+        )
+
+    def _from_json(
+        self, body: bytes, query: MatchQuery
+    ) -> tuple[mapmatch.Trace, str | None, float | None, dict[str, object]]:
+        try:
+            request = MatchRequest.model_validate_json(body)
+        except ValidationError as exc:
+            raise validation_error(exc.errors(include_url=False)) from None
+        given = request.model_fields_set
+        for name in ("network", "trace_id", "fused_distance_m", "crs"):
+            if name in given and getattr(query, name) is not None:
+                msg = f"{name} is given both in the body and in the query; give it once"
+                raise RequestFieldError(msg, field=name)
+        body_options = request.options.overrides() if request.options else {}
+        query_options = query.options()
+        twice = sorted(set(body_options) & set(query_options))
+        if twice:
+            msg = f"option(s) {twice} given both in the body and in the query; give each once"
+            raise OptionError(msg, field=f"options.{twice[0]}")
+        if len(request.points) > self.max_points:
+            raise _too_many(len(request.points), self.max_points)
+        trace_id = request.trace_id if "trace_id" in given else (query.trace_id or "trace")
+        crs = request.crs if "crs" in given else (query.crs or "wgs84")
+        trace = _trace_from_points(request.points, trace_id=trace_id, crs=crs)
+        network_id = request.network if "network" in given else query.network
+        fused = request.fused_distance_m if "fused_distance_m" in given else query.fused_distance_m
+        return trace, network_id, fused, {**body_options, **query_options}
+
+    def _from_file(self, body: bytes, fmt: str, query: MatchQuery) -> mapmatch.Trace:
+        traces = mapmatch.read_traces(
+            body, format=fmt, default_trace_id=query.trace_id, crs=query.crs or "wgs84"
+        )
+        if len(traces) != 1:
+            ids = ", ".join(repr(t.trace_id) for t in traces[:_SHOW])
+            more = ", ..." if len(traces) > _SHOW else ""
+            msg = f"the {fmt} body holds {len(traces)} traces ({ids}{more}); send one per request"
+            raise TraceFileError(msg, format=fmt)
+        trace = traces[0]
+        if trace.report.input_rows > self.max_points:
+            raise _too_many(trace.report.input_rows, self.max_points)
+        return trace
+
+
+def _too_many(count: int, limit: int) -> TooManyPointsError:
+    msg = (
+        f"the trace has {count:,} points; this service matches at most {limit:,} per request; "
+        "split the trace"
+    )
+    return TooManyPointsError(msg, field="points")
+
+
+def _config(overrides: Mapping[str, object]) -> MatchConfig:
+    """The server's configuration with the request's overrides, or an :class:`OptionError`."""
+    if not overrides:
+        return _BASE_CONFIG
+    try:
+        return _BASE_CONFIG.replace(overrides)
+    except ConfigError as exc:
+        text = str(exc)
+        name = text.split(" ", 1)[0]
+        raise OptionError(text, field=f"options.{name}" if name in OVERRIDABLE else None) from None
+
+
+def _column(points: Sequence[PointIn], name: str) -> np.ndarray | None:
+    values = [getattr(p, name) for p in points]
+    if all(v is None for v in values):
+        return None
+    return np.array([np.nan if v is None else v for v in values], dtype=np.float64)
+
+
+def _trace_from_points(points: Sequence[PointIn], *, trace_id: str, crs: str) -> mapmatch.Trace:
+    times = [p.time for p in points]
+    time_col: object = (
+        np.array(times, dtype=np.float64)
+        if all(isinstance(t, float | int) for t in times)
+        else times
+    )
+    return mapmatch.Trace(
+        time=time_col,
+        lon=np.array([p.lon for p in points], dtype=np.float64),
+        lat=np.array([p.lat for p in points], dtype=np.float64),
+        heading=_column(points, "heading"),
+        speed=_column(points, "speed"),
+        accuracy=_column(points, "accuracy"),
+        hdop=_column(points, "hdop"),
+        odometer=_column(points, "odometer"),
+        trace_id=trace_id,
+        crs=crs,
+    )
+
+
+def _where(loc: Iterable[int | str]) -> str:
+    """``("points", 3, "lat")`` -> ``"points[3].lat"``."""
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += f".{part}" if out else str(part)
+    return out
+
+
+def _shown(value: object) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def validation_error(
+    errors: Sequence[ErrorDetails], *, prefix: Sequence[str] = ()
+) -> ServiceError | ConfigError | InvalidTraceError:
+    """
+    One project error for pydantic's validation errors of a request, naming field and rows.
+
+    Errors about ``points`` become :class:`InvalidTraceError` (``invalid_trace``) with the
+    offending point indices as rows; about ``options`` (or an option as a query parameter)
+    :class:`OptionError`; malformed JSON :class:`InvalidJSONError`; anything else
+    :class:`RequestFieldError`. ``prefix`` drops a leading location part (FastAPI's
+    ``"query"``) from what is matched, but keeps it in the field name.
+    """
+    for err in errors:
+        if err["type"] == "json_invalid":
+            msg = f"the body is not valid JSON: {err['msg']}"
+            return InvalidJSONError(msg)
+    first = errors[0]
+    loc = tuple(first["loc"])
+    inner = loc[len(prefix) :] if loc[: len(prefix)] == tuple(prefix) else loc
+    lines = []
+    for err in errors[:_SHOW]:
+        where = _where(err["loc"]) or "body"
+        got = f" (got {_shown(err['input'])})" if err["type"] != "missing" else ""
+        lines.append(f"{where}: {err['msg']}{got}")
+    more = f"; and {len(errors) - _SHOW} more" if len(errors) > _SHOW else ""
+    msg = "; ".join(lines) + more
+    field = _where(loc) or None
+    head = inner[0] if inner else None
+    if head == "points":
+        rows = sorted(
+            {int(e["loc"][1]) for e in errors if len(e["loc"]) > 1 and isinstance(e["loc"][1], int)}
+        )
+        return InvalidTraceError(msg, field=field, rows=rows)
+    if head == "options" or head in OVERRIDABLE:
+        return OptionError(msg, field=field)
+    if not inner and first["type"] in {"model_type", "model_attributes_type"}:
+        msg = (
+            'the body must be a JSON object {"points": [{"time", "lat", "lon"}, ...]} '
+            f"(got {_shown(first['input'])})"
+        )
+    return RequestFieldError(msg, field=field)

@@ -1,0 +1,97 @@
+"""
+Deployment settings of the HTTP service, read from ``MAPMATCH_*`` environment variables.
+
+These say where the service runs and what it may spend, never how it matches: every matching
+parameter lives in :class:`mapmatch.MatchConfig`, and a request may override the fields of
+:data:`mapmatch.OVERRIDABLE` through its ``options``.
+
+==============================  ==============================================================
+variable                        meaning
+==============================  ==============================================================
+``MAPMATCH_NETWORKS``           OSM extracts to serve: a JSON list, or paths separated by
+                                ``os.pathsep`` (``:``); empty = the embedded default (Monaco)
+``MAPMATCH_CACHE_DIR``          folder of compiled networks (also read by :mod:`roadnets`)
+``MAPMATCH_TOKEN``              bearer token every route but ``/healthz`` requires; unset = open
+``MAPMATCH_MAX_BODY_BYTES``     largest request body, bytes (10 MB)
+``MAPMATCH_MAX_POINTS``         most points in one trace (100 000)
+``MAPMATCH_TIME_BUDGET_S``      seconds a match request may take, queueing included (30 s)
+``MAPMATCH_MATCH_THREADS``      matches running at once in one worker process (4)
+``MAPMATCH_MAX_QUEUED``         matches waiting for a thread before 503 ``overloaded`` (64)
+``MAPMATCH_ACCESS_LOG``         one JSON line per request on stderr (true)
+==============================  ==============================================================
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from typing import Annotated
+
+from pydantic import Field, SecretStr, field_validator
+from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
+
+__all__ = ["Settings"]
+
+
+class Settings(BaseSettings):
+    """
+    Deployment settings of one service process (see the module docstring for the variables).
+
+    Examples
+    --------
+    >>> Settings(networks="a.osm.pbf:b.osm.pbf").networks
+    ('a.osm.pbf', 'b.osm.pbf')
+    >>> Settings(networks='["a.osm.pbf"]', max_points=10).max_points
+    10
+    """
+
+    model_config = SettingsConfigDict(
+        env_prefix="MAPMATCH_", env_ignore_empty=True, extra="ignore", frozen=True
+    )
+
+    networks: Annotated[tuple[str, ...], NoDecode] = Field(
+        default=(),
+        description="OSM extracts to serve; empty = the embedded default network.",
+    )
+    cache_dir: str | None = Field(
+        default=None, description="Folder of compiled networks (roadnets' default when unset)."
+    )
+    token: SecretStr | None = Field(
+        default=None, description="Bearer token required by every route but /healthz."
+    )
+    max_body_bytes: int = Field(
+        default=10_000_000, ge=1024, description="Largest accepted request body, bytes."
+    )
+    max_points: int = Field(default=100_000, ge=2, description="Most points in one trace.")
+    time_budget_s: float = Field(
+        default=30.0,
+        gt=0,
+        allow_inf_nan=False,
+        description="Seconds a match request may take, including its wait for a thread.",
+    )
+    match_threads: int = Field(
+        default=4, ge=1, le=256, description="Matches running at once in one process."
+    )
+    max_queued: int = Field(
+        default=64, ge=0, description="Matches waiting for a thread before 503 overloaded."
+    )
+    access_log: bool = Field(default=True, description="Write one JSON line per request.")
+
+    @field_validator("networks", mode="before")
+    @classmethod
+    def _split_networks(cls, value: object) -> object:
+        """Accept a JSON list or an ``os.pathsep``-separated string of paths."""
+        if not isinstance(value, str):
+            return value
+        text = value.strip()
+        if text.startswith("["):
+            return tuple(json.loads(text))
+        return tuple(part for part in text.split(os.pathsep) if part.strip())
+
+    @field_validator("token", mode="after")
+    @classmethod
+    def _empty_token_is_none(cls, value: SecretStr | None) -> SecretStr | None:
+        """A blank token means no authentication, not a token of spaces."""
+        if value is not None and not value.get_secret_value().strip():
+            return None
+        return value
