@@ -69,6 +69,7 @@ class MatchConfig:
     radius_accuracy_factor: float = 4.0
     max_candidates: int = 16
     sigma_m: float = 5.0
+    max_emission_penalty: float = 8.0
     heading_sigma_deg: float = 25.0
     heading_min_speed_mps: float = 1.0
     heading_full_speed_mps: float = 10.0
@@ -109,6 +110,7 @@ class MatchConfig:
             "speed_sigma_mps",
         )
         non_negative = (
+            "max_emission_penalty",
             "heading_min_speed_mps",
             "heading_max_penalty",
             "beta_per_s",

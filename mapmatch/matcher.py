@@ -273,6 +273,8 @@ def _solve(
     point_of = np.repeat(np.arange(n), cands.counts)
     fix_of = used[point_of]
     em = log_emission(cands.distance_m, sigma_m=fixes.sigma_m[fix_of])
+    if config.max_emission_penalty > 0:
+        em = np.logaddexp(em, -config.max_emission_penalty)
     if fixes.heading_deg is not None:
         weight = heading_weight(fixes.speed_mps, config)
         em += log_heading(fixes.heading_deg[fix_of], cands.bearing_deg, weight[fix_of], config)

@@ -21,6 +21,7 @@ __all__ = [
     "ROUTE_VIA_GRAPH",
     "ROUTE_SAME_EDGE",
     "ROUTE_UTURN",
+    "ROUTE_UTURN_AT_NODE",
     "CandidatePairs",
     "candidate_pairs",
     "heading_weight",
@@ -35,8 +36,9 @@ __all__ = [
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
-#: How a transition's route runs: along one edge, through the graph, or a U-turn mid-road.
-ROUTE_SAME_EDGE, ROUTE_VIA_GRAPH, ROUTE_UTURN = 0, 1, 2
+#: How a transition's route runs: along one edge, through the graph, a U-turn mid-road, or
+#: through the graph with a U-turn at a node (scored as a U-turn, assembled as a graph route).
+ROUTE_SAME_EDGE, ROUTE_VIA_GRAPH, ROUTE_UTURN, ROUTE_UTURN_AT_NODE = 0, 1, 2, 3
 
 
 def log_emission(distance_m: FloatArray, *, sigma_m: FloatArray | float) -> FloatArray:
@@ -159,7 +161,7 @@ def routes_between(
     -------
     route_m, time_s, kind
         Metres along the road, seconds at the roads' speed limits, and
-        :data:`ROUTE_SAME_EDGE` or :data:`ROUTE_VIA_GRAPH`.
+        :data:`ROUTE_SAME_EDGE`, :data:`ROUTE_VIA_GRAPH` or :data:`ROUTE_UTURN_AT_NODE`.
     """
     arrays = net.arrays
     ea, eb = cands.edge[pairs.a], cands.edge[pairs.b]
@@ -167,10 +169,15 @@ def routes_between(
     len_a = arrays.edge_length_m[ea]
     speed_a, speed_b = arrays.edge_speed_mps[ea], arrays.edge_speed_mps[eb]
 
-    mid_m, mid_s = table.lookup(arrays.edge_v[ea], arrays.edge_u[eb])
+    mid_m, mid_s, first, last = table.lookup(arrays.edge_v[ea], arrays.edge_u[eb])
     route = (len_a - oa) + mid_m + ob
     time = (len_a - oa) / speed_a + mid_s + ob / speed_b
     kind = np.full(len(ea), ROUTE_VIA_GRAPH, dtype=np.int64)
+    # turning back at a node (onto the twin, right away or at the end of the path) is a U-turn
+    twin_a, twin_b = arrays.edge_twin[ea], arrays.edge_twin[eb]
+    back_first = (first >= 0) & (first == twin_a)
+    back_last = (last >= 0) & (last == twin_b)
+    kind[(eb == twin_a) | back_first | back_last] = ROUTE_UTURN_AT_NODE
 
     same = (ea == eb) & (ob >= oa - config.standstill_m)
     along = np.maximum(ob - oa, 0.0)
@@ -247,5 +254,6 @@ def log_transition(
         with np.errstate(invalid="ignore", over="ignore"):
             off = np.maximum(np.abs(route_m - travel_m) - tolerance, 0.0)
         score = score - np.nan_to_num(off, nan=0.0) / config.travel_beta_m
-    score = np.where(kind == ROUTE_UTURN, score - config.uturn_penalty, score)
+    uturn = (kind == ROUTE_UTURN) | (kind == ROUTE_UTURN_AT_NODE)
+    score = np.where(uturn, score - config.uturn_penalty, score)
     return np.where(np.isfinite(route_m), score, -np.inf)

@@ -9,6 +9,7 @@ and speed with their own noise, and an odometer with a small scale error.
 
 from __future__ import annotations
 
+import heapq
 import json
 import os
 from dataclasses import dataclass
@@ -52,7 +53,10 @@ class SimulationConfig:
     ``outlier_m``; ``outage_rate`` chance per minute of an outage of ``outage_s`` without
     fixes; ``heading_noise_deg`` / ``speed_noise_mps`` 1-sigma noise; ``odometer_scale_error``
     maximum absolute scale error of the odometer (drawn uniformly per trip);
-    ``route_length_m`` target length of each trip; ``stop_probability`` chance of stopping at
+    ``route_length_m`` target length of each trip; ``route`` how trips are chosen:
+    ``fastest`` (the fastest route between a random start and a random end about
+    ``route_length_m`` away, as real trips are) or ``random_walk`` (meandering: straight on
+    preferred at every junction); ``stop_probability`` chance of stopping at
     a junction, for ``stop_s`` seconds (drawn up to it).
     """
 
@@ -72,6 +76,7 @@ class SimulationConfig:
     accel_mps2: float = 1.5
     decel_mps2: float = 2.5
     lateral_accel_mps2: float = 2.0
+    route: str = "fastest"
 
     def __post_init__(self) -> None:
         for name in ("interval_s", "route_length_m", "accel_mps2", "decel_mps2"):
@@ -82,6 +87,9 @@ class SimulationConfig:
             if not 0 <= getattr(self, name) <= 1:
                 msg = f"{name} must be within 0..1 (got {getattr(self, name)!r})"
                 raise ConfigError(msg)
+        if self.route not in ("fastest", "random_walk"):
+            msg = f"route must be 'fastest' or 'random_walk' (got {self.route!r})"
+            raise ConfigError(msg)
         if self.noise_m < 0 or self.outage_rate < 0 or self.noise_correlation_s < 0:
             msg = "noise_m, outage_rate and noise_correlation_s must be >= 0"
             raise ConfigError(msg)
@@ -186,6 +194,54 @@ def _random_route(
     return route if total >= min(length_m, 200.0) else None
 
 
+def _fastest_route(
+    net: RoadNetwork, rng: np.random.Generator, length_m: float
+) -> list[int] | None:
+    """
+    The fastest route (free-flow time, 5 s per turn of more than 45 degrees, banned turns
+    obeyed, no U-turn but at a dead end) from a random edge to a random edge about
+    ``length_m`` of road away; ``None`` if nothing that far can be reached.
+    """
+    a = net.arrays
+    weights = a.edge_length_m / a.edge_length_m.sum()
+    start = int(rng.choice(a.n_edges, p=weights))
+    banned = set(zip(a.banned_in.tolist(), a.banned_out.tolist(), strict=True))
+    time_s = a.edge_length_m / a.edge_speed_mps
+    best: dict[int, float] = {start: 0.0}
+    road: dict[int, float] = {start: float(a.edge_length_m[start])}
+    previous: dict[int, int] = {}
+    heap = [(0.0, start)]
+    limit = 1.6 * length_m
+    while heap:
+        cost, edge = heapq.heappop(heap)
+        if cost > best.get(edge, np.inf) or road[edge] > limit:
+            continue
+        node = int(a.edge_v[edge])
+        outs = [
+            int(e)
+            for e in a.out_edge[a.out_ptr[node] : a.out_ptr[node + 1]]
+            if (edge, int(e)) not in banned
+        ]
+        forward = [e for e in outs if e != a.edge_twin[edge]] or outs
+        for nxt in forward:
+            turn = 5.0 if _turn_deg(net, edge, nxt) > 45.0 else 0.0
+            new = cost + float(time_s[nxt]) + turn
+            if new < best.get(nxt, np.inf):
+                best[nxt] = new
+                road[nxt] = road[edge] + float(a.edge_length_m[nxt])
+                previous[nxt] = edge
+                heapq.heappush(heap, (new, nxt))
+    ends = [e for e, r in road.items() if 0.7 * length_m <= r <= 1.3 * length_m]
+    if not ends:
+        return None
+    edge = ends[int(rng.integers(len(ends)))]
+    route = [edge]
+    while edge != start:
+        edge = previous[edge]
+        route.append(edge)
+    return route[::-1]
+
+
 def _edge_bearing(net: RoadNetwork, edge: int, at_end: bool) -> float:
     a = net.arrays
     lo, hi = int(a.edge_geom_ptr[edge]), int(a.edge_geom_ptr[edge + 1])
@@ -263,7 +319,10 @@ def simulate_trip(
     rng = np.random.default_rng(seed)
     route = None
     for _ in range(50):
-        route = _random_route(net, rng, cfg.route_length_m)
+        if cfg.route == "fastest":
+            route = _fastest_route(net, rng, cfg.route_length_m)
+        else:
+            route = _random_route(net, rng, cfg.route_length_m)
         if route is not None:
             break
     if route is None:

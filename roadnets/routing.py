@@ -33,6 +33,7 @@ def _bounded_dijkstra_many(  # type: ignore[no-untyped-def]  # pragma: no cover 
     dist = np.full(n_nodes, np.inf)
     time = np.zeros(n_nodes)
     pred = np.full(n_nodes, -1, dtype=np.int64)
+    first = np.full(n_nodes, -1, dtype=np.int64)
     settled = np.zeros(n_nodes, dtype=np.bool_)
     touched = np.empty(n_nodes, dtype=np.int64)
     cap = max(1024, 8 * len(sources))
@@ -40,6 +41,7 @@ def _bounded_dijkstra_many(  # type: ignore[no-untyped-def]  # pragma: no cover 
     r_dist = np.empty(cap)
     r_time = np.empty(cap)
     r_pred = np.empty(cap, dtype=np.int64)
+    r_first = np.empty(cap, dtype=np.int64)
     ptr = np.zeros(len(sources) + 1, dtype=np.int64)
     count = 0
     for i in range(len(sources)):
@@ -48,6 +50,7 @@ def _bounded_dijkstra_many(  # type: ignore[no-untyped-def]  # pragma: no cover 
         dist[source] = 0.0
         time[source] = 0.0
         pred[source] = -1
+        first[source] = -1
         n_touched = 1
         touched[0] = source
         heap = [(0.0, source)]
@@ -62,10 +65,12 @@ def _bounded_dijkstra_many(  # type: ignore[no-untyped-def]  # pragma: no cover 
                 r_dist = np.concatenate((r_dist, np.empty(cap - count)))
                 r_time = np.concatenate((r_time, np.empty(cap - count)))
                 r_pred = np.concatenate((r_pred, np.empty(cap - count, dtype=np.int64)))
+                r_first = np.concatenate((r_first, np.empty(cap - count, dtype=np.int64)))
             r_node[count] = node
             r_dist[count] = d
             r_time[count] = time[node]
             r_pred[count] = pred[node]
+            r_first[count] = first[node]
             count += 1
             for k in range(out_ptr[node], out_ptr[node + 1]):
                 e = out_edge[k]
@@ -78,12 +83,13 @@ def _bounded_dijkstra_many(  # type: ignore[no-untyped-def]  # pragma: no cover 
                     dist[nxt] = nd
                     time[nxt] = time[node] + edge_time[e]
                     pred[nxt] = e
+                    first[nxt] = e if node == source else first[node]
                     heapq.heappush(heap, (nd, nxt))
         for j in range(n_touched):
             dist[touched[j]] = np.inf
             settled[touched[j]] = False
         ptr[i + 1] = count
-    return ptr, r_node[:count], r_dist[:count], r_time[:count], r_pred[:count]
+    return ptr, r_node[:count], r_dist[:count], r_time[:count], r_pred[:count], r_first[:count]
 
 
 @dataclass(frozen=True, slots=True)
@@ -97,9 +103,9 @@ class PathTable:
         Number of nodes of the network (keys are ``source * n_nodes + target``).
     keys
         Sorted ``(source, target)`` keys.
-    distance_m, time_s, pred_edge
-        Per key: path length, free-flow travel time at the edges' speed limits, and the last
-        edge of the path (-1 when source == target).
+    distance_m, time_s, pred_edge, first_edge
+        Per key: path length, free-flow time at the edges' speed limits, and the last and
+        first edges of the path (-1 when source == target).
     """
 
     n_nodes: int
@@ -107,13 +113,16 @@ class PathTable:
     distance_m: FloatArray
     time_s: FloatArray
     pred_edge: IntArray
+    first_edge: IntArray
 
-    def lookup(self, source: IntArray, target: IntArray) -> tuple[FloatArray, FloatArray]:
+    def lookup(
+        self, source: IntArray, target: IntArray
+    ) -> tuple[FloatArray, FloatArray, IntArray, IntArray]:
         """
-        Path length and free-flow time for arrays of node pairs.
+        Path length, free-flow time, first and last edge for arrays of node pairs.
 
-        ``inf`` where the table has no path (unreachable, or beyond the bound the source was
-        searched with).
+        Length and time are ``inf`` (edges -1) where the table has no path (unreachable, or
+        beyond the bound the source was searched with); the edges are -1 for an empty path.
         """
         wanted = np.asarray(source, np.int64) * self.n_nodes + np.asarray(target, np.int64)
         where = np.searchsorted(self.keys, wanted)
@@ -125,9 +134,14 @@ class PathTable:
         )
         dist = np.full(len(wanted), np.inf)
         time = np.full(len(wanted), np.inf)
-        dist[found] = self.distance_m[where_c[found]]
-        time[found] = self.time_s[where_c[found]]
-        return dist, time
+        first = np.full(len(wanted), -1, dtype=np.int64)
+        last = np.full(len(wanted), -1, dtype=np.int64)
+        hit = where_c[found]
+        dist[found] = self.distance_m[hit]
+        time[found] = self.time_s[hit]
+        first[found] = self.first_edge[hit]
+        last[found] = self.pred_edge[hit]
+        return dist, time, first, last
 
     def edges(self, source: int, target: int, edge_u: IntArray) -> list[int]:
         """
@@ -154,7 +168,8 @@ class PathTable:
     @property
     def nbytes(self) -> int:
         """Memory held by the table's arrays."""
-        return sum(a.nbytes for a in (self.keys, self.distance_m, self.time_s, self.pred_edge))
+        arrays = (self.keys, self.distance_m, self.time_s, self.pred_edge, self.first_edge)
+        return sum(a.nbytes for a in arrays)
 
 
 def shortest_path_table(
@@ -180,7 +195,7 @@ def shortest_path_table(
     first[1:] = sources[1:] != sources[:-1]
     sources, bounds = sources[first], np.ascontiguousarray(bounds[first])
     edge_time = arrays.edge_length_m / arrays.edge_speed_mps
-    ptr, node, dist, time, pred = _bounded_dijkstra_many(
+    ptr, node, dist, time, pred, first = _bounded_dijkstra_many(
         arrays.out_ptr,
         arrays.out_edge,
         arrays.edge_v,
@@ -193,4 +208,6 @@ def shortest_path_table(
     src = np.repeat(sources, np.diff(ptr))
     keys = src * arrays.n_nodes + node
     order = np.argsort(keys, kind="stable")
-    return PathTable(arrays.n_nodes, keys[order], dist[order], time[order], pred[order])
+    return PathTable(
+        arrays.n_nodes, keys[order], dist[order], time[order], pred[order], first[order]
+    )

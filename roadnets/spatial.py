@@ -28,7 +28,8 @@ class EdgeHits:
     point
         Index of the query point each row belongs to.
     edge
-        Directed edge index. Both directions of a two-way road appear as their own rows.
+        Directed edge index. Both directions of a two-way road appear as their own rows, and
+        an edge that passes a point twice (a hairpin) appears once for each pass.
     distance_m
         Distance from the point to its projection on the edge, metres.
     offset_m
@@ -62,6 +63,38 @@ def build_rtree(arrays: NetworkArrays) -> rtree_index.Index:
     props = rtree_index.Property()
     props.dimension = 2
     return rtree_index.Index((ids, mins, maxs), properties=props)
+
+
+#: Two nearest places on one edge closer than this along it are one place (metres).
+PLACE_SEPARATION_M = 20.0
+
+
+def _nearest_places(point: IntArray, edge: IntArray, offset: FloatArray, dist: FloatArray) -> IntArray:
+    """
+    Rows to keep: the nearest place of each edge to each point, and every other place where
+    the edge comes near the point again (a hairpin passes a point twice).
+
+    A row is kept when it is a local minimum of the distance along its edge (among the
+    segments in reach) and no nearer kept place of the same edge lies within
+    :data:`PLACE_SEPARATION_M` along it.
+    """
+    order = np.lexsort((offset, edge, point))
+    p, e, o, d = point[order], edge[order], offset[order], dist[order]
+    same_prev = np.zeros(len(p), dtype=bool)
+    same_prev[1:] = (p[1:] == p[:-1]) & (e[1:] == e[:-1])
+    same_next = np.zeros(len(p), dtype=bool)
+    same_next[:-1] = same_prev[1:]
+    d_prev = np.concatenate(([np.inf], d[:-1]))
+    d_next = np.concatenate((d[1:], [np.inf]))
+    local = (~same_prev | (d <= d_prev)) & (~same_next | (d <= d_next))
+    order, p, e, o, d = order[local], p[local], e[local], o[local], d[local]
+    # of two minima of one edge close together (e.g. both ends of a shared vertex), the nearer
+    close = np.zeros(len(p), dtype=bool)
+    close[1:] = (p[1:] == p[:-1]) & (e[1:] == e[:-1]) & (o[1:] - o[:-1] < PLACE_SEPARATION_M)
+    worse_than_prev = close & (d >= np.concatenate(([np.inf], d[:-1])))
+    worse_than_next = np.zeros(len(p), dtype=bool)
+    worse_than_next[:-1] = close[1:] & (d[:-1] > d[1:])
+    return np.asarray(order[~(worse_than_prev | worse_than_next)], dtype=np.int64)
 
 
 def query_edges(
@@ -110,16 +143,11 @@ def query_edges(
     point, seg, dist, t, qx, qy = point[near], seg[near], dist[near], t[near], qx[near], qy[near]
     dx, dy, start, seg_len2 = dx[near], dy[near], start[near], seg_len2[near]
     edge = arrays.seg_edge[seg].astype(np.int64)
+    offset = arrays.geom_cum_m[start] + t * np.sqrt(seg_len2)
 
-    # the nearest segment of each (point, edge) pair
-    order = np.lexsort((dist, edge, point))
-    point, edge = point[order], edge[order]
-    first = np.ones(len(point), dtype=bool)
-    first[1:] = (point[1:] != point[:-1]) | (edge[1:] != edge[:-1])
-    keep = order[first]
-    point, edge = point[first], edge[first]
+    keep = _nearest_places(point, edge, offset, dist)
+    point, edge, offset = point[keep], edge[keep], offset[keep]
     dist, qx, qy = dist[keep], qx[keep], qy[keep]
-    offset = arrays.geom_cum_m[start[keep]] + t[keep] * np.sqrt(seg_len2[keep])
     bearing = np.degrees(np.arctan2(dx[keep], dy[keep])) % 360.0
 
     twin = arrays.edge_twin[edge].astype(np.int64)

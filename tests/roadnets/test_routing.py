@@ -24,18 +24,18 @@ def test_bounded_dijkstra_matches_networkx(default_net: roadnets.RoadNetwork) ->
     for s in sources.tolist():
         expected = nx.single_source_dijkstra_path_length(G, s, cutoff=bound, weight="weight")
         targets = np.array(sorted(expected), dtype=np.int64)
-        dist, _ = table.lookup(np.full(len(targets), s), targets)
+        dist, *_ = table.lookup(np.full(len(targets), s), targets)
         assert np.allclose(dist, [expected[t] for t in targets.tolist()])
         # nodes beyond the bound are not in the table
         far = np.setdiff1d(np.arange(a.n_nodes), targets)
-        far_dist, _ = table.lookup(np.full(len(far), s), far)
+        far_dist, *_ = table.lookup(np.full(len(far), s), far)
         assert np.isinf(far_dist).all()
 
 
 def test_path_edges_connect_and_add_up(default_net: roadnets.RoadNetwork) -> None:
     a = default_net.arrays
     table = default_net.shortest_paths(np.array([5]), 1500.0)
-    dist, _ = table.lookup(np.full(a.n_nodes, 5), np.arange(a.n_nodes))
+    dist, *_ = table.lookup(np.full(a.n_nodes, 5), np.arange(a.n_nodes))
     reached = np.flatnonzero(np.isfinite(dist))
     assert len(reached) > 20
     for target in reached[::7].tolist():
@@ -48,6 +48,8 @@ def test_path_edges_connect_and_add_up(default_net: roadnets.RoadNetwork) -> Non
         for first, second in itertools.pairwise(path):
             assert a.edge_v[first] == a.edge_u[second]
         assert sum(a.edge_length_m[p] for p in path) == pytest.approx(dist[target])
+        _, _, first, last = table.lookup(np.array([5]), np.array([target]))
+        assert (first[0], last[0]) == (path[0], path[-1])
 
 
 def test_a_path_the_table_does_not_hold_is_a_key_error(default_net: roadnets.RoadNetwork) -> None:
@@ -61,7 +63,7 @@ def test_free_flow_time_uses_the_speed_limits(oakland_net: roadnets.RoadNetwork)
     a = oakland_net.arrays
     e = 0
     table = oakland_net.shortest_paths(np.array([a.edge_u[e]]), 5000.0)
-    dist, time = table.lookup(np.array([a.edge_u[e]]), np.array([a.edge_v[e]]))
+    dist, time, *_ = table.lookup(np.array([a.edge_u[e]]), np.array([a.edge_v[e]]))
     if dist[0] == pytest.approx(a.edge_length_m[e]):
         assert time[0] == pytest.approx(a.edge_length_m[e] / a.edge_speed_mps[e])
     assert np.all(time <= dist / a.edge_speed_mps.min() + 1e-9)
