@@ -117,6 +117,8 @@ class BatchOptions:
         Local worker processes (``None``: one per core; 1: in this process).
     scheduler
         Dask scheduler address; runs the tasks on that cluster instead.
+    scheduler_timeout_s
+        How long to try to connect to ``scheduler``.
     resume
         Skip traces whose outputs are complete from an earlier run into ``out_dir``.
     chunk_traces
@@ -134,6 +136,7 @@ class BatchOptions:
     config: MatchConfig = field(default_factory=MatchConfig)
     workers: int | None = None
     scheduler: str | None = None
+    scheduler_timeout_s: float = 30.0
     resume: bool = False
     chunk_traces: int | None = None
     log_level: int | None = None
@@ -527,7 +530,12 @@ def run_batch(
                 resumed=len(done),
             )
         if pending:
-            executor = make_executor(options.workers, options.scheduler, preload=["mapmatch.batch"])
+            executor = make_executor(
+                options.workers,
+                options.scheduler,
+                preload=["mapmatch.batch"],
+                timeout_s=options.scheduler_timeout_s,
+            )
             size = _chunk_size(options, len(pending), executor.slots)
             tasks = _tasks(pending, names, size, options, out_dir, network, cache_dir)
             for task, outcome in executor.run(match_chunk, tasks):

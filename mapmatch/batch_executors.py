@@ -177,7 +177,9 @@ class DaskExecutor:
         from distributed import as_completed as dask_as_completed
 
         futures = {self._client.submit(fn, task, pure=False): task for task in tasks}
-        for future in dask_as_completed(list(futures)):  # type: ignore[no-untyped-call]
+        for future in dask_as_completed(  # type: ignore[no-untyped-call]
+            list(futures), loop=self._client.loop
+        ):
             try:
                 outcome: R | BaseException = future.result()
             except Exception as exc:
@@ -190,7 +192,11 @@ class DaskExecutor:
 
 
 def make_executor(
-    workers: int | None, scheduler: str | None, *, preload: Sequence[str] = ()
+    workers: int | None,
+    scheduler: str | None,
+    *,
+    preload: Sequence[str] = (),
+    timeout_s: float = 30.0,
 ) -> InlineExecutor | ProcessExecutor | DaskExecutor:
     """
     The executor for the command line's ``--workers`` / ``--scheduler``.
@@ -204,9 +210,11 @@ def make_executor(
         Address of a Dask scheduler, or ``None`` for local execution.
     preload
         Modules the local fork server imports once.
+    timeout_s
+        How long to try to connect to ``scheduler``.
     """
     if scheduler:
-        return DaskExecutor(scheduler)
+        return DaskExecutor(scheduler, timeout_s=timeout_s)
     count = workers if workers is not None else (os.cpu_count() or 1)
     if count <= 1:
         return InlineExecutor()

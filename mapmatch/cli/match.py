@@ -123,6 +123,13 @@ def add_parser(subparsers: argparse._SubParsersAction[Any]) -> argparse.Argument
         "the same files)",
     )
     p.add_argument(
+        "--scheduler-timeout-s",
+        type=float,
+        default=30.0,
+        metavar="S",
+        help="how long to try to reach the Dask scheduler (default 30)",
+    )
+    p.add_argument(
         "--resume",
         action="store_true",
         help="skip traces whose outputs in --out are complete from an earlier run",
@@ -259,6 +266,7 @@ def run(args: argparse.Namespace) -> int:
         config=config,
         workers=args.workers,
         scheduler=args.scheduler,
+        scheduler_timeout_s=args.scheduler_timeout_s,
         resume=args.resume,
         chunk_traces=args.chunk_traces,
         log_level=logging.WARNING if verbose else logging.ERROR,
