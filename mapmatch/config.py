@@ -56,8 +56,11 @@ class MatchConfig:
         kept fix adds nothing but noise (a stopped or crawling car) and is left out of the
         model. A fix farther than ``outlier_sigmas`` x sigma (5) from where its neighbours put
         it (both at most ``outlier_max_gap_s``, 5 s, away) is an outlier and left out too.
-        Where the trace still breaks, up to ``max_break_repairs`` (8) times the fix at the
-        break is left out if that joins the pieces. Left-out fixes get the position on the
+        A transition less likely than ``min_log_transition`` (-50 nats: a loop around a block
+        to go 30 m back, a detour of hundreds of metres) is taken as impossible: such moves
+        come from a displaced fix, not from driving. Where the trace then breaks, up to
+        ``max_break_repairs`` (8) times the fix at the break is left out if that joins the
+        pieces. Left-out fixes get the position on the
         matched path interpolated by time, and are flagged in the output.
     Distance check
         ``distance_band`` (-4 % .. +1 %): the relative error of the fused trip distance against
@@ -93,6 +96,7 @@ class MatchConfig:
     outlier_sigmas: float = 5.0
     outlier_max_gap_s: float = 5.0
     max_break_repairs: int = 8
+    min_log_transition: float = -50.0
     distance_band: tuple[float, float] = (-0.04, 0.01)
 
     def __post_init__(self) -> None:
@@ -130,6 +134,9 @@ class MatchConfig:
             _check(name, getattr(self, name), lambda v: v > 0, "must be > 0")
         for name in non_negative:
             _check(name, getattr(self, name), lambda v: v >= 0, "must be >= 0")
+        if not (math.isfinite(self.min_log_transition) and self.min_log_transition < 0):
+            msg = f"min_log_transition must be a finite number < 0 (got {self.min_log_transition!r})"
+            raise ConfigError(msg)
         if not isinstance(self.max_break_repairs, int) or self.max_break_repairs < 0:
             msg = f"max_break_repairs must be an integer >= 0 (got {self.max_break_repairs!r})"
             raise ConfigError(msg)

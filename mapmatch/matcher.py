@@ -300,7 +300,7 @@ def _solve(
     use_u = lu > lt
     lt = np.where(use_u, lu, lt)
     kind = np.where(use_u, ROUTE_UTURN, kind)
-    lt[cut_after[pairs.step]] = -np.inf
+    lt[cut_after[pairs.step] | (lt < config.min_log_transition)] = -np.inf
 
     width = max(int(cands.counts.max()) if n else 1, 1)
     em_pad = np.full((n, width), -np.inf)
