@@ -4,9 +4,13 @@ Fusion front-end benchmark on simulated raw logs (fixed seeds).
 Prints position error (mean / 95th percentile, and at outage ends) with and without GNSS
 outages and with and without map-aided feedback; fused-distance error against odometer-only
 and GNSS-chord-only distances; odometer-scale estimates (EKF and RLS); filter speed with and
-without numba.
+without numba. Then the same on real roads: random drives on the embedded Monaco network (and
+on ``shared/data/osm/andorra_2020.osm.pbf`` when it exists), raw logs from
+:func:`mapmatch.fusion.simulate_trip_raw_log`, fused and matched by
+:func:`mapmatch.fusion.fuse_and_match` without and with map-aided feedback: position error,
+fused / odometer / chord distance errors, matched-length error and distance-check verdicts.
 
-    .venv/bin/python benchmarks/bench_fusion.py [--seeds 5]
+    .venv/bin/python benchmarks/bench_fusion.py [--seeds 5] [--trips 10] [--skip-synthetic]
 """
 
 from __future__ import annotations
@@ -16,9 +20,14 @@ import os
 import subprocess
 import sys
 import time
+from collections import Counter
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+import roadnets
+from mapmatch.errors import NoCandidatesError
 from mapmatch.fusion import (
     FusedTrack,
     FusionConfig,
@@ -29,11 +38,14 @@ from mapmatch.fusion import (
     TrueTrajectory,
     build_trajectory,
     fuse,
+    fuse_and_match,
     simulate_raw_log,
+    simulate_trip_raw_log,
     stop,
     straight,
     turn,
 )
+from mapmatch.simulate import SimulationConfig, simulate_trip
 
 ORIGIN = (116.40, 39.90)
 
@@ -107,10 +119,114 @@ SCENARIOS = {
 }  # fmt: skip
 
 
+ANDORRA = Path(__file__).resolve().parents[2] / "shared" / "data" / "osm" / "andorra_2020.osm.pbf"
+CHEAP_GYRO = {"gyro_bias_walk_dps_per_sqrt_s": 0.02, "gyro_noise_dps": 0.1}
+ROAD_SCENARIOS: dict[str, tuple[dict[str, Any], dict[str, Any]]] = {
+    # name: (sim config kwargs, fusion config kwargs); each run without and with feedback
+    "no outage": ({}, {}),
+    "30 s outage": ({"outages_s": ((60.0, 90.0),)}, {}),
+    "90 s outage, cheap gyro": (
+        {"outages_s": ((60.0, 150.0),), **CHEAP_GYRO},
+        {"gyro_bias_walk_dps_per_sqrt_s": 0.02},
+    ),
+}
+
+
+def road_rows(net: roadnets.RoadNetwork, label: str, n_trips: int) -> None:
+    """Fuse and match ``n_trips`` real-road drives per scenario; print one row per variant."""
+    scales = (0.97, 1.03, 1.015, 0.985)
+    lengths = (1200.0, 2000.0, 3000.0)
+    trips = [
+        simulate_trip(
+            net, SimulationConfig(route_length_m=lengths[i % 3]), seed=i, trace_id=f"{label}-{i}"
+        )
+        for i in range(n_trips)
+    ]
+    km = sum(t.length_m for t in trips) / 1e3
+    print(f"\n{label}: {n_trips} drives, {km:.1f} km, 1.2-3 km targets, odometer scales {scales}")
+    hdr = (
+        f"{'scenario':36s} {'fb':>3s} {'mean':>6s} {'p95':>6s} {'out-end':>8s} "
+        f"{'|dist|%':>8s} {'max%':>6s} {'odo|%|':>7s} {'chord|%|':>9s} {'match|%|':>9s} "
+        f"{'match max%':>10s}  verdicts"
+    )
+    print(hdr)
+    print("-" * (len(hdr) + 20))
+    for name, (sim_kw, fus_kw) in ROAD_SCENARIOS.items():
+        acc: dict[bool, dict[str, list[float]]] = {
+            fb: {k: [] for k in ("e", "end", "d", "o", "c", "m")} for fb in (False, True)
+        }
+        verdicts: dict[bool, Counter[str]] = {False: Counter(), True: Counter()}
+        errs: dict[bool, list[np.ndarray]] = {False: [], True: []}
+        for i, trip in enumerate(trips):
+            cfg = RawLogSimConfig(odo_scale=scales[i % len(scales)], **sim_kw)
+            raw, sim = simulate_trip_raw_log(trip, cfg, seed=i)
+            try:
+                fm = fuse_and_match(raw, net, fusion_config=FusionConfig(**fus_kw))
+            except NoCandidatesError:
+                for fb in (False, True):
+                    verdicts[fb]["no-match"] += 1
+                continue
+            tr = sim.trajectory
+            passes = ((False, fm.first_track, fm.first_result), (True, fm.track, fm.result))
+            for fb, trk, res in passes:
+                a = acc[fb]
+                i0 = trk.first_row
+                e = errors(trk, tr)
+                errs[fb].append(e)
+                a["end"] += [float(e[k - i0]) for k in sim.outage_ends]
+                true_m = float(tr.distance_m[-1] - tr.distance_m[i0])
+                a["d"].append(100 * abs(trk.distance_m / true_m - 1))
+                odo_m = float((raw.odo_speed_mps[i0 + 1 :] * np.diff(raw.time_s[i0:])).sum())
+                a["o"].append(100 * abs(odo_m / true_m - 1))
+                a["c"].append(100 * abs(chord_m(raw) / true_m - 1))
+                a["m"].append(100 * abs(res.matched_length_m / true_m - 1))
+                verdicts[fb][res.distance_check.verdict] += 1
+        for fb in (False, True):
+            a = acc[fb]
+            e = np.concatenate(errs[fb]) if errs[fb] else np.array([np.nan])
+            end = f"{np.mean(a['end']):8.2f}" if a["end"] else f"{'-':>8s}"
+            counts = " ".join(
+                f"{k} {verdicts[fb][k]}"
+                for k in ("pass", "over", "under", "incomplete", "no-match")
+                if verdicts[fb][k]
+            )
+            print(
+                f"{name:36s} {'yes' if fb else 'no':>3s} {e.mean():6.2f} "
+                f"{np.percentile(e, 95):6.2f} {end} {np.mean(a['d']):8.3f} "
+                f"{np.max(a['d']):6.2f} {np.mean(a['o']):7.2f} {np.mean(a['c']):9.1f} "
+                f"{np.mean(a['m']):9.3f} {np.max(a['m']):10.2f}  {counts}"
+            )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--trips", type=int, default=10, help="real-road drives per network")
+    ap.add_argument("--skip-synthetic", action="store_true", help="real-road rows only")
     args = ap.parse_args()
+    if not args.skip_synthetic:
+        synthetic(args)
+    print("\n== real roads: fuse -> match (fb no) -> road feedback -> fuse -> match (fb yes) ==")
+    networks: list[tuple[str, str | None]] = [("monaco (embedded)", None)]
+    if ANDORRA.exists():
+        networks.append(("andorra_2020", str(ANDORRA)))
+    for label, source in networks:
+        t0 = time.perf_counter()
+        net = roadnets.load(source)
+        print(f"\nloaded {label} in {time.perf_counter() - t0:.1f} s: {net.info().edges} edges")
+        t0 = time.perf_counter()
+        road_rows(net, label.split()[0], args.trips)
+        print(f"({time.perf_counter() - t0:.1f} s)")
+    print(
+        "\nfb: map-aided feedback (second pass); errors in metres; out-end: mean error at the "
+        "last epoch of each outage;\n|dist|%: fused distance vs true distance driven, mean "
+        "and max |error|; odo / chord: raw odometer and\nGNSS chord-sum distance, mean "
+        "|error|; match: matched length vs true distance, mean and max |error|;\nverdicts: "
+        "distance check of the match (fused odometer vs matched length, band -4 % .. +1 %)."
+    )
+
+
+def synthetic(args: argparse.Namespace) -> None:
     trips = {"city loop 3 laps": city_loop(), "arcs + straights": arcs()}
     scales = (0.97, 1.03)
     print("trips:", ", ".join(f"{k} ({v.length_m:.0f} m)" for k, v in trips.items()))
