@@ -52,7 +52,7 @@ def add_parser(subparsers: argparse._SubParsersAction[Any]) -> argparse.Argument
         help="output one point per this many seconds (0 = every sensor epoch; default 1)",
     )
     p.add_argument("--out", default="-", help="output CSV file, or - for stdout (default)")
-    p.set_defaults(func=run)
+    p.set_defaults(run=run)
     return p
 
 
