@@ -167,6 +167,7 @@ class ChunkOutcome:
     pid: int
     max_rss_kib: int
     seconds: float
+    cpu_s: float
 
 
 @dataclass(frozen=True, slots=True)
@@ -188,6 +189,11 @@ class BatchReport:
         The output folder.
     worker_max_rss_kib
         Peak resident memory of each worker process that ran a task, by ``"host:pid"``.
+    worker_busy_s
+        Seconds each worker process spent in tasks, by ``"host:pid"``.
+    worker_cpu_s
+        CPU seconds each worker process used in tasks (below ``worker_busy_s`` when the
+        machine's cores are shared with other work).
     """
 
     rows: tuple[SummaryRow, ...]
@@ -196,6 +202,8 @@ class BatchReport:
     executor: str
     out_dir: Path
     worker_max_rss_kib: dict[str, int]
+    worker_busy_s: dict[str, float]
+    worker_cpu_s: dict[str, float]
 
     @property
     def traces_ok(self) -> int:
@@ -329,6 +337,7 @@ def match_chunk(task: ChunkTask) -> ChunkOutcome:
         One row per trace of the task, in task order, and the worker's peak memory.
     """
     started = time.perf_counter()
+    cpu_started = time.process_time()
     if task.log_level is not None:
         logging.getLogger("mapmatch").setLevel(task.log_level)
     rows: list[SummaryRow] = []
@@ -344,7 +353,7 @@ def match_chunk(task: ChunkTask) -> ChunkOutcome:
             )
             for index, tid, _name, points in task.traces
         ]
-        return _outcome(rows, started)
+        return _outcome(rows, started, cpu_started)
     for index, tid, name, points in task.traces:
         t0 = time.perf_counter()
         try:
@@ -385,16 +394,17 @@ def match_chunk(task: ChunkTask) -> ChunkOutcome:
                 source=task.display, error=error_line(exc), trace_id=tid, index=index, points=points
             )
             rows.append(dataclasses.replace(row, seconds=time.perf_counter() - t0))
-    return _outcome(rows, started)
+    return _outcome(rows, started, cpu_started)
 
 
-def _outcome(rows: list[SummaryRow], started: float) -> ChunkOutcome:
+def _outcome(rows: list[SummaryRow], started: float, cpu_started: float) -> ChunkOutcome:
     return ChunkOutcome(
         rows=tuple(rows),
         host=socket.gethostname(),
         pid=os.getpid(),
         max_rss_kib=_max_rss_kib(),
         seconds=time.perf_counter() - started,
+        cpu_s=time.process_time() - cpu_started,
     )
 
 
@@ -510,6 +520,8 @@ def run_batch(
     log = SummaryLog(summary_path, keep=list(done.values()))
     new_rows: dict[tuple[str, int, str], SummaryRow] = {}
     worker_rss: dict[str, int] = {}
+    worker_busy: dict[str, float] = {}
+    worker_cpu: dict[str, float] = {}
     executor = None
     try:
         for scan in scans:
@@ -551,6 +563,8 @@ def run_batch(
                     rows = outcome.rows
                     where = f"{outcome.host}:{outcome.pid}"
                     worker_rss[where] = max(worker_rss.get(where, 0), outcome.max_rss_kib)
+                    worker_busy[where] = worker_busy.get(where, 0.0) + outcome.seconds
+                    worker_cpu[where] = worker_cpu.get(where, 0.0) + outcome.cpu_s
                 log.append(rows)
                 for row in rows:
                     new_rows[row.key] = row
@@ -576,6 +590,8 @@ def run_batch(
         executor=executor.description if executor is not None else "nothing to do",
         out_dir=out_dir,
         worker_max_rss_kib=worker_rss,
+        worker_busy_s=worker_busy,
+        worker_cpu_s=worker_cpu,
     )
 
 
