@@ -152,7 +152,12 @@ def assemble(
         path = _piece_path(net, solution, start, stop)
         first, last = int(used[start]), int(used[stop - 1])
         segments.append(_segment(net, index, first, last, path))
-        fixes = np.arange(first, last + 1)
+        lo, hi = first, last  # outliers just before or after the piece join it, clamped
+        while lo > 0 and outlier[lo - 1] and segment_of[lo - 1] < 0:
+            lo -= 1
+        while hi < n - 1 and outlier[hi + 1]:
+            hi += 1
+        fixes = np.arange(lo, hi + 1)
         piece_used = used[start:stop]
         along = np.interp(trace.time_s[fixes], trace.time_s[piece_used], path.along_m)
         edge[fixes], offset[fixes] = _locate(path, along)

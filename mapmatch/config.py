@@ -43,7 +43,8 @@ class MatchConfig:
         (route / dt, less twice sigma for noise) above ``speed_factor`` x the path's speed
         limit + ``speed_margin_mps`` (1.5 x + 5 m/s) costs a Gaussian penalty with
         ``speed_sigma_mps`` (5 m/s). A move backwards along the same edge of at most
-        ``standstill_m`` (15 m) is noise around a stopped car; a U-turn in the middle of a road
+        ``standstill_m`` (10 m) or ``standstill_sigmas`` x sigma (4, so 20 m at 5 m) is noise
+        around a slow or stopped car, not a turn; a U-turn in the middle of a road
         costs ``uturn_penalty`` (6 nats). Fused traces know how far the car went between two
         fixes (odometer increments, else the mean reported speed x dt); with ``use_travel``
         a route that differs from that by more than ``travel_tolerance_m +
@@ -85,7 +86,8 @@ class MatchConfig:
     speed_factor: float = 1.5
     speed_margin_mps: float = 5.0
     speed_sigma_mps: float = 5.0
-    standstill_m: float = 15.0
+    standstill_m: float = 10.0
+    standstill_sigmas: float = 4.0
     uturn_penalty: float = 6.0
     use_travel: bool = True
     travel_tolerance_m: float = 5.0
@@ -122,6 +124,7 @@ class MatchConfig:
             "route_slack_m",
             "speed_margin_mps",
             "standstill_m",
+            "standstill_sigmas",
             "uturn_penalty",
             "travel_tolerance_m",
             "travel_tolerance_frac",
@@ -135,7 +138,9 @@ class MatchConfig:
         for name in non_negative:
             _check(name, getattr(self, name), lambda v: v >= 0, "must be >= 0")
         if not (math.isfinite(self.min_log_transition) and self.min_log_transition < 0):
-            msg = f"min_log_transition must be a finite number < 0 (got {self.min_log_transition!r})"
+            msg = (
+                f"min_log_transition must be a finite number < 0 (got {self.min_log_transition!r})"
+            )
             raise ConfigError(msg)
         if not isinstance(self.max_break_repairs, int) or self.max_break_repairs < 0:
             msg = f"max_break_repairs must be an integer >= 0 (got {self.max_break_repairs!r})"
@@ -160,7 +165,9 @@ class MatchConfig:
             raise ConfigError(msg)
         low, high = self.distance_band
         if not (math.isfinite(low) and math.isfinite(high) and -1 < low <= 0 <= high < 10):
-            msg = f"distance_band must be (low <= 0, high >= 0) fractions (got {self.distance_band})"
+            msg = (
+                f"distance_band must be (low <= 0, high >= 0) fractions (got {self.distance_band})"
+            )
             raise ConfigError(msg)
 
     def replace(self, overrides: Mapping[str, object]) -> MatchConfig:

@@ -147,7 +147,10 @@ def match(
     clock = _lap(timings, "candidates", clock)
 
     has_cands = cands.counts > 0
-    outlier = find_outliers(x, y, trace.time_s, sigma, config) & has_cands
+    near = np.flatnonzero(has_cands)  # outliers are judged among fixes near a road
+    outlier = np.zeros(n, dtype=bool)
+    travel = _travel_between(fixes, near, config)
+    outlier[near] = find_outliers(x[near], y[near], trace.time_s[near], sigma[near], config, travel)
     lonely = _isolated(~has_cands)
     keep = thin_fixes(x, y, sigma, has_cands & ~outlier, config)
     used = np.flatnonzero(keep)
@@ -286,7 +289,7 @@ def _solve(
     bounds = route_search_bounds(step_m, config)
     leaving = point_of < n - 1
     table = net.shortest_paths(net.arrays.edge_v[cands.edge[leaving]], bounds[point_of[leaving]])
-    route, free_time, kind = routes_between(net, cands, pairs, table, config)
+    route, free_time, kind = routes_between(net, cands, pairs, table, config, fixes.sigma_m[fix_of])
     gc, step_dt = step_m[pairs.step], dt[pairs.step]
     sigma = fixes.sigma_m[used]
     step_sigma = np.maximum(sigma[pairs.step], sigma[pairs.step + 1])

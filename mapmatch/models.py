@@ -146,13 +146,15 @@ def routes_between(
     pairs: CandidatePairs,
     table: PathTable,
     config: MatchConfig,
+    cands_sigma_m: FloatArray,
 ) -> tuple[FloatArray, FloatArray, IntArray]:
     """
     Route distance, free-flow time and route kind of every candidate pair.
 
     The route runs along the directed graph from candidate ``a``'s position to ``b``'s:
-    forward along one edge when both are on it (a move back by at most ``standstill_m`` is
-    noise around a stopped car and counts as 0 m); otherwise to the end of ``a``'s edge,
+    forward along one edge when both are on it (a move back by at most
+    ``max(standstill_m, standstill_sigmas * sigma)`` is noise around a slow or stopped car
+    and counts as 0 m; ``cands_sigma_m`` is the position sigma of each candidate's fix); otherwise to the end of ``a``'s edge,
     through the graph to the start of ``b``'s edge, and along it. When ``b`` is on the
     reverse twin of ``a``'s edge, a U-turn in place is an alternative scored separately
     (:func:`uturn_routes`). Unreachable pairs get ``inf``.
@@ -179,7 +181,9 @@ def routes_between(
     back_last = (last >= 0) & (last == twin_b)
     kind[(eb == twin_a) | back_first | back_last] = ROUTE_UTURN_AT_NODE
 
-    same = (ea == eb) & (ob >= oa - config.standstill_m)
+    sigma = np.maximum(cands_sigma_m[pairs.a], cands_sigma_m[pairs.b])
+    tolerance = np.maximum(config.standstill_m, config.standstill_sigmas * sigma)
+    same = (ea == eb) & (ob >= oa - tolerance)
     along = np.maximum(ob - oa, 0.0)
     use_same = same & (along <= route)
     route = np.where(use_same, along, route)

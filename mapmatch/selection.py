@@ -17,7 +17,12 @@ BoolArray = npt.NDArray[np.bool_]
 
 
 def find_outliers(
-    x: FloatArray, y: FloatArray, time_s: FloatArray, sigma_m: FloatArray, config: MatchConfig
+    x: FloatArray,
+    y: FloatArray,
+    time_s: FloatArray,
+    sigma_m: FloatArray,
+    config: MatchConfig,
+    travel: tuple[FloatArray, FloatArray] | None = None,
 ) -> BoolArray:
     """
     Fixes far from where their neighbours put them.
@@ -29,6 +34,11 @@ def find_outliers(
     about 1.2 sigma of the prediction. A run of
     displaced fixes is not caught here (its members predict each other); the matcher's break
     repair handles those.
+
+    The first and last fix have one neighbour only. When the trace says how far the car went
+    (``travel``: distance and extra slack per step, as the transition model uses it), an end
+    fix farther from its neighbour than that travel + slack + ``outlier_sigmas`` x sigma is an
+    outlier (unless the neighbour is one itself).
 
     Examples
     --------
@@ -52,6 +62,14 @@ def find_outliers(
     padded = np.concatenate(([0.0], residual, [0.0]))
     worst = (residual >= padded[:-2]) & (residual >= padded[2:])
     out[1:-1] = close & (residual > limit) & worst
+    if travel is not None:
+        travel_m, slack_m = travel
+        for end, inner, step in ((0, 1, 0), (n - 1, n - 2, n - 2)):
+            gap = float(np.hypot(x[end] - x[inner], y[end] - y[inner]))
+            allowed = travel_m[step] + slack_m[step] + config.outlier_sigmas * sigma_m[end]
+            quick = time_s[max(end, inner)] - time_s[min(end, inner)] <= config.outlier_max_gap_s
+            if quick and not out[inner] and gap > allowed:
+                out[end] = True
     return out
 
 

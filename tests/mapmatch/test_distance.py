@@ -1,0 +1,62 @@
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mapmatch.distance import check_distance, chord_length_m
+
+BAND = (-0.04, 0.01)
+
+
+def _check(**kw: object) -> object:
+    base: dict[str, object] = {
+        "trace_id": "t",
+        "matched_length_m": 1000.0,
+        "complete": True,
+        "band": BAND,
+        "odometer_m": None,
+        "fused_distance_m": None,
+        "chord_m": 950.0,
+    }
+    base.update(kw)
+    return check_distance(**base)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("fused", "verdict"),
+    [(1000.0, "pass"), (1009.9, "pass"), (960.1, "pass"), (1010.5, "over"), (959.0, "under")],
+)
+def test_verdict_follows_the_metering_band(fused: float, verdict: str) -> None:
+    c = _check(fused_distance_m=fused)
+    assert c.source == "caller"  # type: ignore[attr-defined]
+    assert c.verdict == verdict  # type: ignore[attr-defined]
+    assert c.relative_error == pytest.approx((fused - 1000.0) / 1000.0)  # type: ignore[attr-defined]
+
+
+def test_odometer_is_preferred_and_uses_last_minus_first_known() -> None:
+    odo = np.array([np.nan, 100.0, 600.0, 1105.0, np.nan])
+    c = _check(odometer_m=odo, fused_distance_m=2000.0)
+    assert c.source == "odometer"  # type: ignore[attr-defined]
+    assert c.fused_length_m == pytest.approx(1005.0)  # type: ignore[attr-defined]
+
+
+def test_chord_sum_is_the_last_resort() -> None:
+    c = _check()
+    assert (c.source, c.fused_length_m, c.verdict) == ("chord", 950.0, "under")  # type: ignore[attr-defined]
+
+
+def test_breaks_make_the_check_incomplete() -> None:
+    c = _check(complete=False, fused_distance_m=1000.0)
+    assert c.verdict == "incomplete"  # type: ignore[attr-defined]
+
+
+def test_zero_matched_length_gives_no_ratio() -> None:
+    c = _check(matched_length_m=0.0, fused_distance_m=5.0)
+    assert math.isnan(c.relative_error)  # type: ignore[attr-defined]
+    assert c.to_dict()["relative_error"] is None  # type: ignore[attr-defined]
+
+
+def test_chord_length_sums_straight_lines() -> None:
+    assert chord_length_m(np.array([0.0, 3.0, 3.0]), np.array([0.0, 4.0, 10.0])) == 11.0

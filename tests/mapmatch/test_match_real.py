@@ -1,0 +1,92 @@
+"""Accuracy on a real extract with simulated traces of known truth (fixed seeds)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import mapmatch
+import roadnets
+from mapmatch.evaluate import score_geojson, summarise
+from mapmatch.simulate import SimulationConfig, simulate_trips
+
+
+def _scores(net: roadnets.RoadNetwork, cfg: SimulationConfig, count: int) -> list:
+    trips = simulate_trips(net, cfg, count=count, seed=500)
+    return [
+        score_geojson(mapmatch.match(t.trace, net).to_geojson(), t.truth_record()) for t in trips
+    ]
+
+
+def test_one_second_five_metre_traces_match_almost_perfectly(
+    default_net: roadnets.RoadNetwork,
+) -> None:
+    cfg = SimulationConfig(interval_s=1, noise_m=5, outlier_rate=0.02, route_length_m=2500)
+    scores = _scores(default_net, cfg, 12)
+    summary = summarise(scores)
+    assert summary["mismatch_mean"] < 0.02
+    for s in scores:
+        assert abs(s.length_error) < 0.01, s
+        assert s.breaks == 0
+
+
+def test_thirty_second_twenty_metre_traces_stay_under_ten_percent(
+    default_net: roadnets.RoadNetwork,
+) -> None:
+    cfg = SimulationConfig(interval_s=30, noise_m=20, outlier_rate=0.02, route_length_m=3000)
+    summary = summarise(_scores(default_net, cfg, 16))
+    assert summary["mismatch_mean"] < 0.10
+
+
+def test_fifteen_second_ten_metre_traces(default_net: roadnets.RoadNetwork) -> None:
+    cfg = SimulationConfig(interval_s=15, noise_m=10, outlier_rate=0.02, route_length_m=3000)
+    summary = summarise(_scores(default_net, cfg, 12))
+    assert summary["mismatch_mean"] < 0.05
+
+
+def test_the_fused_odometer_passes_the_distance_check(default_net: roadnets.RoadNetwork) -> None:
+    cfg = SimulationConfig(interval_s=1, noise_m=4, odometer_scale_error=0.002, route_length_m=2000)
+    for trip in simulate_trips(default_net, cfg, count=5, seed=42):
+        check = mapmatch.match(trip.trace, default_net).distance_check
+        assert check.source == "odometer"
+        assert check.verdict == "pass", check
+
+
+def test_a_miscalibrated_odometer_is_flagged(default_net: roadnets.RoadNetwork) -> None:
+    cfg = SimulationConfig(interval_s=1, noise_m=4, odometer_scale_error=0.0, route_length_m=2000)
+    trip = simulate_trips(default_net, cfg, count=1, seed=43)[0]
+    t = trip.trace
+    inflated = mapmatch.Trace(
+        time=t.time_s,
+        lon=t.lon,
+        lat=t.lat,
+        heading=t.heading_deg,
+        speed=t.speed_mps,
+        accuracy=t.accuracy_m,
+        odometer=t.odometer_m * 1.05,
+        trace_id=t.trace_id,
+    )
+    check = mapmatch.match(inflated, default_net).distance_check
+    assert check.verdict == "over"
+    assert check.relative_error == pytest.approx(0.05, abs=0.01)
+
+
+def test_matching_is_deterministic(default_net: roadnets.RoadNetwork) -> None:
+    trip = simulate_trips(default_net, SimulationConfig(), count=1, seed=7)[0]
+    first = mapmatch.match(trip.trace, default_net).to_geojson()
+    second = mapmatch.match(trip.trace, default_net).to_geojson()
+    first["stats"].pop("timings_s")
+    second["stats"].pop("timings_s")
+    assert first == second
+
+
+def test_every_fix_of_a_clean_trace_lands_near_its_true_position(
+    default_net: roadnets.RoadNetwork,
+) -> None:
+    trip = simulate_trips(default_net, SimulationConfig(noise_m=3), count=1, seed=8)[0]
+    result = mapmatch.match(trip.trace, default_net)
+    x, y = default_net.project(result.points.lon, result.points.lat)
+    tx, ty = default_net.project(trip.true_lon, trip.true_lat)
+    error = np.hypot(x - tx, y - ty)
+    assert np.median(error) < 3.0
+    assert np.percentile(error, 95) < 10.0

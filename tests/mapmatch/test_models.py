@@ -1,0 +1,146 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mapmatch.config import MatchConfig
+from mapmatch.errors import ConfigError
+from mapmatch.models import (
+    ROUTE_SAME_EDGE,
+    ROUTE_UTURN,
+    ROUTE_VIA_GRAPH,
+    candidate_pairs,
+    heading_weight,
+    log_emission,
+    log_heading,
+    log_transition,
+)
+
+
+def test_emission_is_gaussian_in_distance() -> None:
+    d = np.array([0.0, 5.0, 10.0])
+    assert log_emission(d, sigma_m=5.0).tolist() == [0.0, -0.5, -2.0]
+
+
+def test_heading_counts_more_the_faster_the_car() -> None:
+    cfg = MatchConfig()
+    speeds = np.array([0.0, 1.0, 5.5, 10.0, 30.0])
+    w = heading_weight(speeds, cfg)
+    assert w.tolist() == [0.0, 0.0, 0.5, 1.0, 1.0]
+    wrong = log_heading(np.full(5, 0.0), np.full(5, 180.0), w, cfg)
+    assert wrong[0] == 0.0
+    assert wrong[2] == pytest.approx(-0.5 * cfg.heading_max_penalty)
+    assert wrong[4] == -cfg.heading_max_penalty
+    # a small disagreement costs little, and angles wrap around north
+    near = log_heading(np.array([355.0]), np.array([5.0]), np.array([1.0]), cfg)
+    assert near[0] == pytest.approx(-0.5 * (10 / cfg.heading_sigma_deg) ** 2)
+    assert log_heading(np.array([np.nan]), np.array([5.0]), np.array([1.0]), cfg)[0] == 0.0
+
+
+def test_transition_is_exponential_in_the_distance_mismatch() -> None:
+    cfg = MatchConfig(beta_m=4.0, beta_per_s=0.0)
+    one = np.ones(3)
+    lt = log_transition(
+        np.array([10.0, 10.0, 10.0]),
+        np.array([10.0, 14.0, np.inf]),
+        np.array([1.0, 1.0, 1.0]),
+        np.full(3, ROUTE_VIA_GRAPH),
+        one,
+        one * 5,
+        cfg,
+    )
+    assert lt[0] == 0.0
+    assert lt[1] == pytest.approx(-1.0)
+    assert lt[2] == -np.inf
+
+
+def test_implausible_speed_and_u_turns_cost_extra() -> None:
+    cfg = MatchConfig()
+    gc = np.array([100.0, 100.0])
+    route = np.array([100.0, 100.0])
+    free_time = np.array([1.0, 10.0])  # free-flow time of the path at its speed limits
+    lt = log_transition(
+        gc, route, free_time, np.full(2, ROUTE_VIA_GRAPH), np.full(2, 1.0), np.full(2, 5.0), cfg
+    )
+    # 100 m in 1 s on roads limited to 10 m/s (second) is implausible; at 100 m/s limits it is not
+    assert lt[0] == 0.0
+    assert lt[1] < -10
+    kinds = np.array([ROUTE_SAME_EDGE, ROUTE_UTURN])
+    lu = log_transition(
+        np.full(2, 20.0),
+        np.full(2, 20.0),
+        np.full(2, 10.0),
+        kinds,
+        np.full(2, 2.0),
+        np.full(2, 5.0),
+        cfg,
+    )
+    assert lu[0] - lu[1] == pytest.approx(cfg.uturn_penalty)
+
+
+def test_reported_travel_only_counts_outside_its_tolerance() -> None:
+    cfg = MatchConfig()
+    gc = np.full(3, 50.0)
+    route = np.array([50.0, 55.0, 120.0])
+    travel = (np.full(3, 50.0), np.zeros(3))
+    lt = log_transition(
+        gc,
+        np.array([50.0, 50.0, 50.0]),
+        np.full(3, 5.0),
+        np.full(3, ROUTE_VIA_GRAPH),
+        np.full(3, 5.0),
+        np.full(3, 5.0),
+        cfg,
+        travel,
+    )
+    assert lt.tolist() == [0.0, 0.0, 0.0]
+    lt = log_transition(
+        gc,
+        route,
+        np.full(3, 5.0),
+        np.full(3, ROUTE_VIA_GRAPH),
+        np.full(3, 5.0),
+        np.full(3, 5.0),
+        cfg,
+        travel,
+    )
+    base = -np.abs(gc - route) / (cfg.beta_m + cfg.beta_per_s * 5.0)
+    tolerance = cfg.travel_tolerance_m + cfg.travel_tolerance_frac * 50.0
+    assert lt[1] == pytest.approx(base[1])  # 5 m off is inside the tolerance
+    assert lt[2] == pytest.approx(base[2] - (70.0 - tolerance) / cfg.travel_beta_m)
+
+
+def test_candidate_pairs_cover_every_pair_of_consecutive_fixes() -> None:
+    ptr = np.array([0, 3, 3, 5, 6])  # fix 1 has no candidate
+    pairs = candidate_pairs(ptr)
+    got = set(zip(pairs.a.tolist(), pairs.b.tolist(), strict=True))
+    assert got == {(3, 5), (4, 5)}
+    assert pairs.step.tolist() == [2, 2]
+    assert pairs.a_rank.tolist() == [0, 1]
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "needle"),
+    [
+        ("sigma_m", -1.0, "sigma_m must be > 0 (got -1)"),
+        ("sigma_m", float("nan"), "sigma_m must be a finite number"),
+        ("search_radius_m", 10_000.0, "search_radius_m must be <= max_search_radius_m"),
+        ("max_candidates", 0, "max_candidates must be an integer in 1..64"),
+        ("beta_m", 0.0, "beta_m must be > 0"),
+        ("distance_band", (0.01, -0.04), "distance_band"),
+    ],
+)
+def test_config_errors_name_the_field_and_value(field: str, value: object, needle: str) -> None:
+    with pytest.raises(ConfigError) as caught:
+        MatchConfig(**{field: value})  # type: ignore[arg-type]
+    assert needle in str(caught.value)
+
+
+def test_config_overrides_are_limited_to_the_documented_fields() -> None:
+    cfg = MatchConfig().replace({"sigma_m": 7.0, "distance_band": [-0.05, 0.02]})
+    assert cfg.sigma_m == 7.0
+    assert cfg.distance_band == (-0.05, 0.02)
+    with pytest.raises(ConfigError, match="unknown option"):
+        MatchConfig().replace({"route_slack_m": 5.0})
+    with pytest.raises(ConfigError, match="sigma_m must be > 0"):
+        MatchConfig().replace({"sigma_m": -1})

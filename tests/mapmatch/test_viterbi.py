@@ -1,0 +1,99 @@
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from mapmatch.viterbi import posteriors, viterbi
+
+
+@dataclass
+class Trellis:
+    log_emission: np.ndarray
+    log_transition: np.ndarray
+
+
+@st.composite
+def small_trellises(draw: st.DrawFn, max_steps: int = 5, max_states: int = 4) -> Trellis:
+    steps = draw(st.integers(2, max_steps))
+    width = draw(st.integers(1, max_states))
+    finite = st.floats(min_value=-20, max_value=0, allow_nan=False)
+    em = np.array(draw(st.lists(finite, min_size=steps * width, max_size=steps * width)))
+    tr_size = (steps - 1) * width * width
+    tr = np.array(draw(st.lists(finite, min_size=tr_size, max_size=tr_size)))
+    return Trellis(em.reshape(steps, width), tr.reshape(steps - 1, width, width))
+
+
+def sequence_log_lik(trellis: Trellis, states: np.ndarray) -> float:
+    em, tr = trellis.log_emission, trellis.log_transition
+    total = em[0, states[0]]
+    for t in range(1, len(states)):
+        total += tr[t - 1, states[t - 1], states[t]] + em[t, states[t]]
+    return float(total)
+
+
+def all_sequences(trellis: Trellis) -> list[tuple[np.ndarray, float]]:
+    steps, width = trellis.log_emission.shape
+    out = []
+    for seq in itertools.product(range(width), repeat=steps):
+        states = np.array(seq)
+        out.append((states, sequence_log_lik(trellis, states)))
+    return out
+
+
+def brute_force_max_log_lik(trellis: Trellis) -> float:
+    return max(ll for _, ll in all_sequences(trellis))
+
+
+@settings(max_examples=200)
+@given(trellis=small_trellises(max_steps=5, max_states=4))
+def test_viterbi_finds_the_most_likely_sequence(trellis: Trellis) -> None:
+    best = viterbi(trellis.log_emission, trellis.log_transition)
+    assert best.pieces == [(0, len(trellis.log_emission))]
+    assert best.log_likelihood == pytest.approx(brute_force_max_log_lik(trellis))
+    assert best.log_likelihood == pytest.approx(sequence_log_lik(trellis, best.states))
+
+
+@settings(max_examples=100)
+@given(trellis=small_trellises(max_steps=4, max_states=3))
+def test_posteriors_are_the_brute_force_marginals(trellis: Trellis) -> None:
+    steps, width = trellis.log_emission.shape
+    post = posteriors(trellis.log_emission, trellis.log_transition, [(0, steps)])
+    seqs = all_sequences(trellis)
+    lls = np.array([ll for _, ll in seqs])
+    weights = np.exp(lls - lls.max())
+    weights /= weights.sum()
+    expected = np.zeros((steps, width))
+    for (states, _), w in zip(seqs, weights, strict=True):
+        expected[np.arange(steps), states] += w
+    assert np.allclose(post, expected, atol=1e-9)
+    assert np.allclose(post.sum(axis=1), 1.0)
+
+
+def test_no_possible_transition_splits_the_sequence() -> None:
+    em = np.log(np.full((4, 2), 0.5))
+    tr = np.zeros((3, 2, 2))
+    tr[1] = -np.inf  # nothing connects fix 1 to fix 2
+    best = viterbi(em, tr)
+    assert best.pieces == [(0, 2), (2, 4)]
+    assert best.breaks == [2]
+    assert (best.states >= 0).all()
+
+
+def test_a_fix_without_candidates_is_unmatched_and_splits() -> None:
+    em = np.zeros((5, 2))
+    em[2] = -np.inf
+    best = viterbi(em, np.zeros((4, 2, 2)))
+    assert best.states[2] == -1
+    assert best.pieces == [(0, 2), (3, 5)]
+
+
+def test_padding_states_are_never_chosen() -> None:
+    em = np.array([[0.0, -np.inf], [-1.0, -0.5], [0.0, -np.inf]])
+    tr = np.zeros((2, 2, 2))
+    best = viterbi(em, tr)
+    assert best.states.tolist() == [0, 1, 0]
