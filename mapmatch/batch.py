@@ -542,8 +542,9 @@ def run_batch(
                 resumed=len(done),
             )
         if pending:
+            workers = options.workers if options.workers is not None else os.cpu_count() or 1
             executor = make_executor(
-                options.workers,
+                min(workers, len(pending)),  # no pool of processes for one trace
                 options.scheduler,
                 preload=["mapmatch.batch"],
                 timeout_s=options.scheduler_timeout_s,

@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 
     from mapmatch.batch_outputs import SummaryRow
 
-__all__ = ["add_parser", "main", "run"]
+__all__ = ["add_parser", "run"]
 
 #: Command-line flags that set :class:`~mapmatch.MatchConfig` fields: flag -> (field, type).
 CONFIG_FLAGS: dict[str, tuple[str, type]] = {
@@ -281,30 +281,3 @@ def run(args: argparse.Namespace) -> int:
     if not args.quiet:
         print(_human_summary(report))
     return report.exit_code
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """
-    Run ``match`` alone (``python -m mapmatch.cli.match ...``), as ``mapmatch match`` does.
-
-    Errors the project raises on purpose print as one line with exit code 2.
-    """
-    from roadnets.errors import MapMatchError
-
-    parser = argparse.ArgumentParser(prog="mapmatch")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    add_parser(sub)
-    args = parser.parse_args(["match", *(sys.argv[1:] if argv is None else argv)])
-    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    try:
-        return int(args.run(args))
-    except MapMatchError as exc:
-        print(f"mapmatch: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("mapmatch: interrupted", file=sys.stderr)
-        return 130
-
-
-if __name__ == "__main__":
-    sys.exit(main())

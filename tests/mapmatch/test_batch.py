@@ -19,7 +19,7 @@ import pandas as pd
 import pytest
 
 from mapmatch.batch_outputs import SUMMARY_COLUMNS, read_summary
-from mapmatch.cli import match as match_cli
+from mapmatch.cli import main as cli_main
 from mapmatch.simulate import SimulationConfig, simulate_trips
 
 if TYPE_CHECKING:
@@ -97,7 +97,7 @@ def mixed_folder(
 
 
 def _run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    code = match_cli.main(argv)
+    code = cli_main(["match", *argv])
     out, err = capsys.readouterr()
     return code, out, err
 
@@ -140,7 +140,7 @@ def geojson_run(
     argv = [str(mixed_folder), "--out", str(out), "--cache-dir", str(cache_dir), "--workers", "1"]
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
-        code = match_cli.main(argv)
+        code = cli_main(["match", *argv])
     return out, code, buf.getvalue()
 
 
@@ -290,7 +290,8 @@ def test_stdin_pipe_names_outputs_by_trace_id(
         [
             sys.executable,
             "-m",
-            "mapmatch.cli.match",
+            "mapmatch",
+            "match",
             "-",
             "--out",
             str(tmp_path),
@@ -335,7 +336,7 @@ def test_usage_errors_exit_2(
     assert code == 2
     assert "sigma_m must be > 0 (got -1)" in err
     with pytest.raises(SystemExit) as exc:
-        match_cli.main([str(mixed_folder), "--out", str(tmp_path), "--workers", "0"])
+        cli_main(["match", str(mixed_folder), "--out", str(tmp_path), "--workers", "0"])
     assert exc.value.code == 2
     assert "--workers: must be a whole number >= 1" in capsys.readouterr().err
 
@@ -391,7 +392,7 @@ def reference_run(
     """An uninterrupted in-process run that the other executors must reproduce."""
     out = tmp_path_factory.mktemp("reference")
     argv = [str(many_traces), "--out", str(out), "--format", "csv", "--workers", "1"]
-    assert match_cli.main([*argv, "--cache-dir", str(cache_dir), "--quiet"]) == 0
+    assert cli_main(["match", *argv, "--cache-dir", str(cache_dir), "--quiet"]) == 0
     return out
 
 
@@ -399,7 +400,7 @@ def test_sigkill_then_resume_gives_the_uninterrupted_outputs(
     many_traces: Path, cache_dir: Path, reference_run: Path, tmp_path: Path
 ) -> None:
     out = tmp_path / "out"
-    argv = [sys.executable, "-m", "mapmatch.cli.match", str(many_traces), "--out", str(out)]
+    argv = [sys.executable, "-m", "mapmatch", "match", str(many_traces), "--out", str(out)]
     argv += ["--format", "csv", "--cache-dir", str(cache_dir), "--quiet"]
     proc = subprocess.Popen(
         [*argv, "--workers", "2", "--chunk-traces", "2"],
