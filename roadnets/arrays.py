@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -99,26 +99,49 @@ class NetworkArrays:
         """Number of directed edges."""
         return len(self.edge_u)
 
-    def save(self, folder: Path) -> dict[str, int]:
-        """Write every array as ``<name>.npy`` into ``folder``; return the file sizes."""
-        sizes: dict[str, int] = {}
-        for field in dataclasses.fields(self):
-            path = folder / f"{field.name}.npy"
-            np.save(path, getattr(self, field.name), allow_pickle=False)
-            sizes[field.name] = path.stat().st_size
-        return sizes
+    def save(self, path: Path) -> dict[str, list[Any]]:
+        """
+        Write every array into one binary file; return its layout.
+
+        The layout maps each array's name to ``[dtype, shape, byte offset]``; arrays start on
+        64-byte boundaries so that :meth:`load` can hand out aligned views of one mapping.
+        """
+        layout: dict[str, list[Any]] = {}
+        offset = 0
+        with path.open("wb") as handle:
+            for field in dataclasses.fields(self):
+                array = np.ascontiguousarray(getattr(self, field.name))
+                pad = -offset % 64
+                handle.write(b"\0" * pad)
+                offset += pad
+                layout[field.name] = [array.dtype.str, list(array.shape), offset]
+                handle.write(array.tobytes())
+                offset += array.nbytes
+        return layout
 
     @classmethod
-    def load(cls, folder: Path, *, mmap: bool = True) -> NetworkArrays:
-        """Read the arrays written by :meth:`save`, memory-mapped read-only by default."""
-        mode: Literal["r"] | None = "r" if mmap else None
-        values = {
-            field.name: np.load(folder / f"{field.name}.npy", mmap_mode=mode, allow_pickle=False)
-            for field in dataclasses.fields(cls)
-        }
+    def load(cls, path: Path, layout: dict[str, list[Any]], *, mmap: bool = True) -> NetworkArrays:
+        """
+        Read the arrays written by :meth:`save`: views of one read-only memory mapping.
+
+        Raises
+        ------
+        ValueError
+            The layout does not describe this class's arrays, or the file is too short.
+        """
+        names = {field.name for field in dataclasses.fields(cls)}
+        if set(layout) != names:
+            msg = f"layout lists {sorted(set(layout) ^ names)} wrongly"
+            raise ValueError(msg)
+        buffer: np.ndarray = (
+            np.memmap(path, dtype=np.uint8, mode="r") if mmap else np.fromfile(path, dtype=np.uint8)
+        )
+        values = {}
+        for name, (dtype, shape, offset) in layout.items():
+            dt = np.dtype(dtype)
+            count = int(np.prod(shape))
+            if offset + count * dt.itemsize > len(buffer):
+                msg = f"array {name} runs past the end of {path.name}"
+                raise ValueError(msg)
+            values[name] = np.ndarray(tuple(shape), dtype=dt, buffer=buffer, offset=offset)
         return cls(**values)
-
-    @classmethod
-    def file_names(cls) -> list[str]:
-        """Names of the files :meth:`save` writes."""
-        return [f"{field.name}.npy" for field in dataclasses.fields(cls)]

@@ -1,9 +1,10 @@
 """On-disk cache of compiled networks, keyed by the source's content hash and the format.
 
-A cache entry is a folder of ``.npy`` arrays (memory-mappable, so server and batch workers
-share one copy through the page cache) plus ``meta.json`` with a checksum of every file. An
-entry is written to a temporary folder and renamed into place, so a crash never leaves half an
-entry; an entry whose files do not match their checksums is removed and rebuilt.
+A cache entry is a folder with one binary file of all arrays (memory-mapped read-only, so
+server and batch workers share one copy through the page cache) and ``meta.json`` with the
+arrays' layout and a checksum of the file. An entry is written to a temporary folder and
+renamed into place, so a crash never leaves half an entry; an entry whose file does not match
+its checksum is removed and rebuilt.
 """
 
 from __future__ import annotations
@@ -24,7 +25,10 @@ from roadnets.errors import CacheError
 __all__ = ["FORMAT_VERSION", "default_cache_dir", "entry_folder", "read_entry", "write_entry"]
 
 #: Bump whenever the compiled arrays change meaning; old entries are then ignored.
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+
+#: The one file holding every array of an entry (layout and checksum in meta.json).
+ARRAYS_FILE = "arrays.bin"
 
 _log = logging.getLogger("roadnets")
 
@@ -96,11 +100,15 @@ def write_entry(
     except OSError as exc:
         raise CacheError(str(parent), exc.strerror or str(exc)) from exc
     try:
-        arrays.save(tmp)
+        layout = arrays.save(tmp / ARRAYS_FILE)
         for name, value in extra.items():
             (tmp / name).write_text(json.dumps(value), encoding="utf-8")
-        files = {name: _checksum(tmp / name) for name in NetworkArrays.file_names()}
-        payload = {**meta, "format_version": FORMAT_VERSION, "checksums": files}
+        payload = {
+            **meta,
+            "format_version": FORMAT_VERSION,
+            "layout": layout,
+            "checksum": _checksum(tmp / ARRAYS_FILE),
+        }
         (tmp / "meta.json").write_text(json.dumps(payload), encoding="utf-8")
         try:
             tmp.rename(folder)
@@ -124,15 +132,10 @@ def read_entry(folder: Path) -> tuple[NetworkArrays, dict[str, Any]] | None:
         if meta.get("format_version") != FORMAT_VERSION:
             msg = "format version differs"
             raise ValueError(msg)
-        checksums: dict[str, str] = meta["checksums"]
-        if set(checksums) != set(NetworkArrays.file_names()):
-            msg = "array files differ"
+        if _checksum(folder / ARRAYS_FILE) != meta["checksum"]:
+            msg = f"checksum of {ARRAYS_FILE} differs"
             raise ValueError(msg)
-        for name, expected in checksums.items():
-            if _checksum(folder / name) != expected:
-                msg = f"checksum of {name} differs"
-                raise ValueError(msg)
-        arrays = NetworkArrays.load(folder)
+        arrays = NetworkArrays.load(folder / ARRAYS_FILE, meta["layout"])
     except (OSError, ValueError, KeyError, TypeError) as exc:
         _log.warning("network cache entry %s is corrupt (%s); rebuilding it", folder, exc)
         with contextlib.suppress(OSError):

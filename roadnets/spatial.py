@@ -69,7 +69,9 @@ def build_rtree(arrays: NetworkArrays) -> rtree_index.Index:
 PLACE_SEPARATION_M = 20.0
 
 
-def _nearest_places(point: IntArray, edge: IntArray, offset: FloatArray, dist: FloatArray) -> IntArray:
+def _nearest_places(
+    point: IntArray, edge: IntArray, offset: FloatArray, dist: FloatArray
+) -> IntArray:
     """
     Rows to keep: the nearest place of each edge to each point, and every other place where
     the edge comes near the point again (a hairpin passes a point twice).

@@ -211,7 +211,8 @@ def test_second_load_reads_the_cache(tmp_path: Path) -> None:
     second = roadnets.load(cache_dir=tmp_path)
     assert not first.from_cache
     assert second.from_cache
-    assert isinstance(second.arrays.edge_length_m, np.memmap)
+    assert isinstance(second.arrays.edge_length_m.base, np.memmap)
+    assert not second.arrays.edge_length_m.flags.writeable
     assert np.array_equal(first.arrays.edge_u, second.arrays.edge_u)
     entries = list(tmp_path.glob(f"*-v{FORMAT_VERSION}"))
     assert len(entries) == 1
@@ -220,9 +221,9 @@ def test_second_load_reads_the_cache(tmp_path: Path) -> None:
 def test_a_corrupt_cache_entry_is_rebuilt(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     roadnets.load(cache_dir=tmp_path)
     (entry,) = tmp_path.glob(f"*-v{FORMAT_VERSION}")
-    target = entry / "edge_length_m.npy"
+    target = entry / "arrays.bin"
     raw = bytearray(target.read_bytes())
-    raw[-8:] = b"\x00" * 8
+    raw[-8:] = b"\xff" * 8
     target.write_bytes(bytes(raw))
     with caplog.at_level(logging.WARNING, logger="roadnets"):
         again = roadnets.load(cache_dir=tmp_path)
@@ -231,10 +232,18 @@ def test_a_corrupt_cache_entry_is_rebuilt(tmp_path: Path, caplog: pytest.LogCapt
     assert roadnets.load(cache_dir=tmp_path).from_cache
 
 
+def test_a_truncated_cache_file_is_rebuilt(tmp_path: Path) -> None:
+    roadnets.load(cache_dir=tmp_path)
+    (entry,) = tmp_path.glob(f"*-v{FORMAT_VERSION}")
+    target = entry / "arrays.bin"
+    target.write_bytes(target.read_bytes()[:1000])
+    assert not roadnets.load(cache_dir=tmp_path).from_cache
+
+
 def test_a_missing_cache_file_is_rebuilt(tmp_path: Path) -> None:
     roadnets.load(cache_dir=tmp_path)
     (entry,) = tmp_path.glob(f"*-v{FORMAT_VERSION}")
-    (entry / "out_edge.npy").unlink()
+    (entry / "arrays.bin").unlink()
     assert not roadnets.load(cache_dir=tmp_path).from_cache
 
 
