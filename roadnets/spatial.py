@@ -73,8 +73,10 @@ def _nearest_places(
     point: IntArray, edge: IntArray, offset: FloatArray, dist: FloatArray
 ) -> IntArray:
     """
-    Rows to keep: the nearest place of each edge to each point, and every other place where
-    the edge comes near the point again (a hairpin passes a point twice).
+    Rows to keep: the nearest place of each edge to each point, and any other.
+
+    An edge may come near a point again further along (a hairpin passes a point twice); each
+    such place is a candidate of its own.
 
     A row is kept when it is a local minimum of the distance along its edge (among the
     segments in reach) and no nearer kept place of the same edge lies within
