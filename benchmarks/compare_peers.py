@@ -383,7 +383,14 @@ def main(argv: list[str] | None = None) -> int:
         stem = extract.name.split(".")[0]
         for k, ts in enumerate(sets):
             set_dir = out / stem / ts.label
-            simulate(extract, ts, a.traces, a.seed + 100 * k, set_dir, use_mapmatch=use_mapmatch)
+            try:
+                simulate(
+                    extract, ts, a.traces, a.seed + 100 * k, set_dir, use_mapmatch=use_mapmatch
+                )
+            except subprocess.CalledProcessError as exc:
+                print(f"[compare_peers] {stem} {ts.label}: simulation failed ({exc}); skipped")
+                skipped[f"{stem} {ts.label}"] = "simulation failed"
+                continue
             truth = read_truth(set_dir / "truth.jsonl")
             params = {
                 "interval_s": ts.interval_s,
