@@ -12,10 +12,9 @@ from mapmatch.models import ROUTE_SAME_EDGE, ROUTE_UTURN
 from mapmatch.result import MatchedEdge, MatchedPoints, Segment
 
 if TYPE_CHECKING:
-    from roadnets import RoadNetwork
-
     from mapmatch.matcher import Solution
     from mapmatch.trace import Trace
+    from roadnets import RoadNetwork
 
 __all__ = ["Assembled", "assemble"]
 

@@ -9,9 +9,8 @@ import numpy as np
 import numpy.typing as npt
 
 if TYPE_CHECKING:
-    from roadnets import RoadNetwork
-
     from mapmatch.config import MatchConfig
+    from roadnets import RoadNetwork
 
 __all__ = ["Candidates", "find_candidates", "search_radii"]
 

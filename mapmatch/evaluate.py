@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping, Sequence
 
 __all__ = ["TripScore", "score_geojson", "summarise"]
 
@@ -62,14 +64,18 @@ def _union_length(spans: list[tuple[float, float]]) -> float:
 
 
 def _overlap(a: list[tuple[float, float]], b: list[tuple[float, float]]) -> float:
-    spans = [(max(x0, y0), min(x1, y1)) for x0, x1 in a for y0, y1 in b if min(x1, y1) > max(x0, y0)]
+    spans = [
+        (max(x0, y0), min(x1, y1)) for x0, x1 in a for y0, y1 in b if min(x1, y1) > max(x0, y0)
+    ]
     return _union_length(spans)
 
 
 def score_geojson(result: Mapping[str, Any], truth: Mapping[str, Any]) -> TripScore:
     """
-    Score a match (its GeoJSON, as :meth:`MatchResult.to_geojson` or ``mapmatch match``
-    write it) against the truth record of the trace (a line of ``truth.jsonl``).
+    Score a match against the truth record of its trace.
+
+    ``result`` is the match's GeoJSON, as :meth:`MatchResult.to_geojson` or ``mapmatch
+    match`` write it; ``truth`` a line of ``truth.jsonl``.
 
     Examples
     --------
@@ -83,7 +89,10 @@ def score_geojson(result: Mapping[str, Any], truth: Mapping[str, Any]) -> TripSc
     """
     features = result.get("features", [])
     matched_edges = [
-        e for f in features if f["properties"].get("kind") == "segment" for e in f["properties"]["edges"]
+        e
+        for f in features
+        if f["properties"].get("kind") == "segment"
+        for e in f["properties"]["edges"]
     ]
     truth_spans = _intervals(truth["edges"])
     matched_spans = _intervals(matched_edges)
@@ -91,7 +100,8 @@ def score_geojson(result: Mapping[str, Any], truth: Mapping[str, Any]) -> TripSc
     matched_len = float(sum(e["end_offset_m"] - e["start_offset_m"] for e in matched_edges))
     matched_union = sum(_union_length(v) for v in matched_spans.values())
     common = sum(
-        _overlap(truth_spans[k], matched_spans[k]) for k in truth_spans.keys() & matched_spans.keys()
+        _overlap(truth_spans[k], matched_spans[k])
+        for k in truth_spans.keys() & matched_spans.keys()
     )
     added, missed = matched_union - common, true_len - common
     point_edges = truth.get("point_edges", [])

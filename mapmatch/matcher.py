@@ -38,9 +38,8 @@ from mapmatch.selection import find_outliers, thin_fixes
 from mapmatch.viterbi import posteriors, viterbi
 
 if TYPE_CHECKING:
-    from roadnets import PathTable, RoadNetwork
-
     from mapmatch.trace import Trace
+    from roadnets import PathTable, RoadNetwork
 
 __all__ = ["match"]
 
@@ -321,8 +320,9 @@ def _travel_between(
     fixes: Fixes, used: IntArray, config: MatchConfig
 ) -> tuple[FloatArray, FloatArray] | None:
     """
-    Distance the trace says the car travelled between consecutive used fixes, and the extra
-    tolerance it deserves: odometer increments where both ends have one (no extra), else the
+    Distance the trace says the car travelled between consecutive used fixes, and its slack.
+
+    Odometer increments where both ends have one (no extra), else the
     mean reported speed times dt (``travel_tolerance_mps * dt`` extra, as the speed may
     change in between); NaN where neither is known; ``None`` when the trace has neither
     column or ``use_travel`` is off.

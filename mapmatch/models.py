@@ -12,16 +12,15 @@ import numpy as np
 import numpy.typing as npt
 
 if TYPE_CHECKING:
-    from roadnets import PathTable, RoadNetwork
-
     from mapmatch.candidates import Candidates
     from mapmatch.config import MatchConfig
+    from roadnets import PathTable, RoadNetwork
 
 __all__ = [
-    "ROUTE_VIA_GRAPH",
     "ROUTE_SAME_EDGE",
     "ROUTE_UTURN",
     "ROUTE_UTURN_AT_NODE",
+    "ROUTE_VIA_GRAPH",
     "CandidatePairs",
     "candidate_pairs",
     "heading_weight",
@@ -154,10 +153,10 @@ def routes_between(
     The route runs along the directed graph from candidate ``a``'s position to ``b``'s:
     forward along one edge when both are on it (a move back by at most
     ``max(standstill_m, standstill_sigmas * sigma)`` is noise around a slow or stopped car
-    and counts as 0 m; ``cands_sigma_m`` is the position sigma of each candidate's fix); otherwise to the end of ``a``'s edge,
-    through the graph to the start of ``b``'s edge, and along it. When ``b`` is on the
-    reverse twin of ``a``'s edge, a U-turn in place is an alternative scored separately
-    (:func:`uturn_routes`). Unreachable pairs get ``inf``.
+    and counts as 0 m; ``cands_sigma_m`` is the position sigma of each candidate's fix);
+    otherwise to the end of ``a``'s edge, through the graph to the start of ``b``'s edge, and
+    along it. When ``b`` is on the reverse twin of ``a``'s edge, a U-turn in place is an
+    alternative scored separately (:func:`uturn_routes`). Unreachable pairs get ``inf``.
 
     Returns
     -------
@@ -242,7 +241,7 @@ def log_transition(
     >>> from mapmatch.config import MatchConfig
     >>> log_transition(np.array([10.0]), np.array([13.0]), np.array([1.0]),
     ...                np.array([1]), np.array([1.0]), np.array([5.0]), MatchConfig())
-    array([-0.92307692])
+    array([-0.90909091])
     """
     beta = config.beta_m + config.beta_per_s * dt_s + config.beta_per_sigma * sigma_m
     with np.errstate(invalid="ignore"):

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import heapq
 import json
-import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -23,13 +22,15 @@ from mapmatch.errors import ConfigError
 from mapmatch.trace import Trace
 
 if TYPE_CHECKING:
+    import os
+
     import pandas as pd
 
     from roadnets import RoadNetwork
 
 __all__ = [
-    "SimulationConfig",
     "SimulatedTrip",
+    "SimulationConfig",
     "TruthEdge",
     "simulate_trip",
     "simulate_trips",
@@ -127,9 +128,9 @@ class SimulatedTrip:
     A simulated trip: the observed trace and the truth behind it.
 
     ``true_edge``/``true_offset_m`` give the true directed edge and offset of every fix of
-    ``trace`` (``true_uvk`` the edge as OSM ``u, v, key``); ``dense_*`` the true trajectory at 10 Hz (time, lon, lat, heading, speed and
-    cumulative distance), for the fusion front-end; ``edges`` the driven route from the first
-    fix to the last and ``length_m`` its length.
+    ``trace`` (``true_uvk`` the edge as OSM ``u, v, key``); ``dense_*`` the true trajectory at
+    10 Hz (time, lon, lat, heading, speed and cumulative distance), for the fusion front-end;
+    ``edges`` the driven route from the first fix to the last and ``length_m`` its length.
     """
 
     trace: Trace
@@ -163,9 +164,7 @@ class SimulatedTrip:
         }
 
 
-def _random_route(
-    net: RoadNetwork, rng: np.random.Generator, length_m: float
-) -> list[int] | None:
+def _random_route(net: RoadNetwork, rng: np.random.Generator, length_m: float) -> list[int] | None:
     """Edges of a random drive of about ``length_m``; ``None`` if it got stuck at once."""
     a = net.arrays
     weights = a.edge_length_m / a.edge_length_m.sum()
@@ -194,13 +193,12 @@ def _random_route(
     return route if total >= min(length_m, 200.0) else None
 
 
-def _fastest_route(
-    net: RoadNetwork, rng: np.random.Generator, length_m: float
-) -> list[int] | None:
+def _fastest_route(net: RoadNetwork, rng: np.random.Generator, length_m: float) -> list[int] | None:
     """
-    The fastest route (free-flow time, 5 s per turn of more than 45 degrees, banned turns
-    obeyed, no U-turn but at a dead end) from a random edge to a random edge about
-    ``length_m`` of road away; ``None`` if nothing that far can be reached.
+    The fastest route from a random edge to a random edge about ``length_m`` of road away.
+
+    Free-flow time plus 5 s per turn of more than 45 degrees, banned turns obeyed, no U-turn
+    but at a dead end; ``None`` if nothing that far can be reached.
     """
     a = net.arrays
     weights = a.edge_length_m / a.edge_length_m.sum()
@@ -246,7 +244,9 @@ def _edge_bearing(net: RoadNetwork, edge: int, at_end: bool) -> float:
     a = net.arrays
     lo, hi = int(a.edge_geom_ptr[edge]), int(a.edge_geom_ptr[edge + 1])
     i = hi - 2 if at_end else lo
-    return float(np.degrees(np.arctan2(a.geom_x[i + 1] - a.geom_x[i], a.geom_y[i + 1] - a.geom_y[i])))
+    return float(
+        np.degrees(np.arctan2(a.geom_x[i + 1] - a.geom_x[i], a.geom_y[i + 1] - a.geom_y[i]))
+    )
 
 
 def _turn_deg(net: RoadNetwork, into: int, out: int) -> float:
@@ -254,7 +254,9 @@ def _turn_deg(net: RoadNetwork, into: int, out: int) -> float:
     return abs((diff + 180.0) % 360.0 - 180.0)
 
 
-def _route_polyline(net: RoadNetwork, route: list[int]) -> tuple[FloatArray, FloatArray, FloatArray]:
+def _route_polyline(
+    net: RoadNetwork, route: list[int]
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """x, y and cumulative distance of the route's vertices, and each edge's start distance."""
     xs, ys = [], []
     for i, e in enumerate(route):
@@ -269,8 +271,12 @@ def _route_polyline(net: RoadNetwork, route: list[int]) -> tuple[FloatArray, Flo
 
 
 def _speed_profile(
-    net: RoadNetwork, route: list[int], edge_start: FloatArray, total_m: float,
-    cfg: SimulationConfig, rng: np.random.Generator,
+    net: RoadNetwork,
+    route: list[int],
+    edge_start: FloatArray,
+    total_m: float,
+    cfg: SimulationConfig,
+    rng: np.random.Generator,
 ) -> tuple[FloatArray, FloatArray, list[tuple[float, float]]]:
     """Target speed on a 1 m grid along the route, and the stops (distance, seconds)."""
     a = net.arrays
@@ -285,9 +291,9 @@ def _speed_profile(
         if turn > np.radians(20):
             radius = 12.0 / max(np.tan(turn / 2.0), 1e-3) + 3.0
             v_turn = float(np.sqrt(cfg.lateral_accel_mps2 * radius))
-            cap[int(round(at))] = min(cap[int(round(at))], max(v_turn, 3.0))
+            cap[round(at)] = min(cap[round(at)], max(v_turn, 3.0))
         if rng.random() < cfg.stop_probability:
-            cap[int(round(at))] = 0.0
+            cap[round(at)] = 0.0
             stops.append((float(at), float(rng.uniform(2.0, cfg.stop_s))))
     cap[0] = 0.0
     cap[-1] = 0.0
@@ -339,7 +345,7 @@ def simulate_trip(
     dt_grid = 1.0 / np.maximum(0.5 * (v_grid[:-1] + v_grid[1:]), 0.3)
     t_grid = np.concatenate(([0.0], np.cumsum(dt_grid)))
     for at, dwell in stops:
-        t_grid[int(round(at)) + 1 :] += dwell
+        t_grid[round(at) + 1 :] += dwell
     dense_t = np.arange(0.0, t_grid[-1], 1.0 / _DENSE_HZ)
     dense_s = np.interp(dense_t, t_grid, grid)
     dense_v = np.interp(dense_s, grid, v_grid)
@@ -366,7 +372,9 @@ def simulate_trip(
     lon, lat = net.unproject(obs_x, obs_y)
     heading = _interp_angle(sample_t, dense_t, dense_heading)
     heading = (heading + rng.normal(0, cfg.heading_noise_deg, len(s))) % 360.0
-    speed = np.maximum(np.interp(sample_t, dense_t, dense_v) + rng.normal(0, cfg.speed_noise_mps, len(s)), 0.0)
+    speed = np.maximum(
+        np.interp(sample_t, dense_t, dense_v) + rng.normal(0, cfg.speed_noise_mps, len(s)), 0.0
+    )
     scale = 1.0 + float(rng.uniform(-cfg.odometer_scale_error, cfg.odometer_scale_error))
     odometer = s * scale
     trace = Trace(
@@ -393,8 +401,16 @@ def simulate_trip(
         lo = true_offset[0] if i == first else 0.0
         hi = true_offset[-1] if i == last else float(a.edge_length_m[e])
         truth_edges.append(
-            TruthEdge(e, int(u[i - first]), int(v[i - first]), int(key[i - first]),
-                      int(a.edge_way_id[e]), float(a.edge_length_m[e]), float(lo), float(hi))
+            TruthEdge(
+                e,
+                int(u[i - first]),
+                int(v[i - first]),
+                int(key[i - first]),
+                int(a.edge_way_id[e]),
+                float(a.edge_length_m[e]),
+                float(lo),
+                float(hi),
+            )
         )
     inside = (s_vert > s[0]) & (s_vert < s[-1])
     gx = np.concatenate(([true_x[0]], x[inside], [true_x[-1]]))
@@ -452,8 +468,10 @@ def simulate_trips(
 
 def write_trips(trips: list[SimulatedTrip], out_dir: str | os.PathLike[str]) -> tuple[Path, Path]:
     """
-    Write ``traces.csv`` (all traces, DESIGN.md's columns) and ``truth.jsonl`` (one JSON
-    object per trace: true route edges, geometry and length) into ``out_dir``.
+    Write ``traces.csv`` and ``truth.jsonl`` into ``out_dir``.
+
+    ``traces.csv`` holds all traces in DESIGN.md's columns; ``truth.jsonl`` one JSON object
+    per trace: true route edges, geometry and length.
     """
     import pandas as pd
 

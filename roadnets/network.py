@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import networkx as nx
 import numpy as np
@@ -110,7 +110,9 @@ class RoadNetwork:
         radius = np.asarray(radius_m, dtype=np.float64)
         return query_edges(self.rtree, self.arrays, x, y, radius, max_per_point=max_per_point)
 
-    def shortest_paths(self, sources: IntArray, bounds_m: float | FloatArray) -> PathTable:
+    def shortest_paths(
+        self, sources: npt.NDArray[np.integer[Any]], bounds_m: float | FloatArray
+    ) -> PathTable:
         """Bounded shortest paths from each source node (see :func:`shortest_path_table`)."""
         return shortest_path_table(self.arrays, sources, np.asarray(bounds_m, dtype=np.float64))
 

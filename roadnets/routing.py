@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import heapq
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -24,6 +24,7 @@ __all__ = ["PathTable", "shortest_path_table"]
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
+IndexArray = npt.NDArray[np.integer[Any]]
 
 
 @njit(cache=True, nogil=True)
@@ -116,7 +117,7 @@ class PathTable:
     first_edge: IntArray
 
     def lookup(
-        self, source: IntArray, target: IntArray
+        self, source: IndexArray, target: IndexArray
     ) -> tuple[FloatArray, FloatArray, IntArray, IntArray]:
         """
         Path length, free-flow time, first and last edge for arrays of node pairs.
@@ -143,7 +144,7 @@ class PathTable:
         last[found] = self.pred_edge[hit]
         return dist, time, first, last
 
-    def edges(self, source: int, target: int, edge_u: IntArray) -> list[int]:
+    def edges(self, source: int, target: int, edge_u: IndexArray) -> list[int]:
         """
         Edge indices of the path from ``source`` to ``target`` in driving order.
 
@@ -173,7 +174,7 @@ class PathTable:
 
 
 def shortest_path_table(
-    arrays: NetworkArrays, sources: IntArray, bounds_m: FloatArray
+    arrays: NetworkArrays, sources: IndexArray, bounds_m: FloatArray
 ) -> PathTable:
     """
     Run a bounded Dijkstra from every source and gather the results in one table.

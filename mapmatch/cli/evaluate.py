@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import roadnets
 from mapmatch.config import MatchConfig
@@ -13,6 +12,9 @@ from mapmatch.errors import TraceFileError
 from mapmatch.evaluate import TripScore, score_geojson, summarise
 from mapmatch.matcher import match
 from mapmatch.trace import read_traces
+
+if TYPE_CHECKING:
+    import argparse
 
 __all__ = ["add_parser", "run"]
 

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
-import argparse
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import roadnets
 from mapmatch.simulate import SimulationConfig, simulate_trips, write_trips
+
+if TYPE_CHECKING:
+    import argparse
 
 __all__ = ["add_parser", "run"]
 

@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import pytest
 
 import mapmatch
-import roadnets
 from mapmatch.evaluate import score_geojson, summarise
 from mapmatch.simulate import SimulationConfig, simulate_trips
+
+if TYPE_CHECKING:
+    import roadnets
 
 
 def _scores(net: roadnets.RoadNetwork, cfg: SimulationConfig, count: int) -> list:

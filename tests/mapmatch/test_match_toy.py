@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
-from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
 
 import mapmatch
-import roadnets
 from tests.mapmatch.toy import drive, load, trace_of, write_osm
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+    import roadnets
 
 PRIMARY = {"highway": "primary"}
 ONEWAY = {"highway": "primary", "oneway": "yes"}
@@ -179,7 +183,8 @@ def test_geojson_follows_the_output_schema(dual_carriageway: roadnets.RoadNetwor
     }
     assert 0.0 <= point["confidence"] <= 1.0
     lon, lat = points[3]["geometry"]["coordinates"]
-    assert abs(lat - 45.0) < 0.001 and abs(lon - 8.0) < 0.01
+    assert abs(lat - 45.0) < 0.001
+    assert abs(lon - 8.0) < 0.01
     check = doc["distance_check"]
     assert check["source"] == "chord"
     assert set(check) == {

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
-from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-import roadnets
 import mapmatch
+import roadnets
+
+if TYPE_CHECKING:
+    from pathlib import Path
 
 LON0, LAT0 = 8.0, 45.0
 _M_PER_DEG_LAT = 111_132.0

@@ -33,7 +33,7 @@ def test_fuse_writes_trace_csv(trips, tmp_path: Path) -> None:
     args = _parser().parse_args(
         ["fuse", str(tmp_path / "raw.csv"), "--out", str(tmp_path / "o.csv")]
     )
-    assert args.func(args) == 0
+    assert args.run(args) == 0
     df = pd.read_csv(tmp_path / "o.csv")
     assert list(df.columns) == ["time", "lat", "lon", "heading", "speed", "accuracy", "odometer"]
     assert np.allclose(np.diff(df["time"].to_numpy()[:-1]), 1.0, atol=0.051)  # 1 Hz default
