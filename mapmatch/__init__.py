@@ -20,7 +20,14 @@ from mapmatch.errors import (
     TraceFileError,
 )
 from mapmatch.matcher import match
-from mapmatch.result import Diagnostics, MatchedEdge, MatchedPoints, MatchResult, MatchStats, Segment
+from mapmatch.result import (
+    Diagnostics,
+    MatchedEdge,
+    MatchedPoints,
+    MatchResult,
+    MatchStats,
+    Segment,
+)
 from mapmatch.trace import Trace, TraceReport, read_traces
 
 __all__ = [
