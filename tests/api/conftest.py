@@ -134,6 +134,17 @@ def serve_process(
             process.wait()
 
 
+def _wait_listening(base_url: str) -> None:
+    deadline = time.monotonic() + READY_TIMEOUT_S
+    while time.monotonic() < deadline:
+        try:
+            httpx.get(f"{base_url}/healthz", timeout=2.0)
+            return
+        except httpx.TransportError:
+            time.sleep(0.05)
+    pytest.fail(f"server at {base_url} does not answer")
+
+
 @dataclass
 class ThreadServer:
     """An in-process uvicorn server (its app reachable for white-box checks)."""
@@ -144,7 +155,7 @@ class ThreadServer:
 
 @contextlib.contextmanager
 def thread_server(
-    settings: Settings, *, ready_headers: dict[str, str] | None = None
+    settings: Settings, *, ready_headers: dict[str, str] | None = None, wait: bool = True
 ) -> Iterator[ThreadServer]:
     """Serve ``create_app(settings)`` with uvicorn in a thread on a free loopback port."""
     app = create_app(settings)
@@ -157,7 +168,10 @@ def thread_server(
     thread.start()
     base_url = f"http://127.0.0.1:{port}"
     try:
-        wait_ready(base_url, headers=ready_headers)
+        if wait:
+            wait_ready(base_url, headers=ready_headers)
+        else:
+            _wait_listening(base_url)
         yield ThreadServer(base_url, app)
     finally:
         server.should_exit = True
@@ -207,9 +221,9 @@ def long_trace(trips: list[SimulatedTrip], copies: int) -> Trace:
 
 @pytest.fixture(scope="session")
 def slow_trace(trips: list[SimulatedTrip]) -> Trace:
-    """About 3 000 points: a match that takes far longer than 50 ms."""
-    trace = long_trace(trips, copies=8)
-    assert len(trace) > 2000
+    """About 1 200 points with breaks between the trips: a match of about half a second."""
+    trace = long_trace(trips, copies=2)
+    assert len(trace) > 1000
     assert np.all(np.diff(trace.time_s) > 0)
     return trace
 
@@ -323,3 +337,15 @@ def secured(cache_dir: Path) -> Iterator[ThreadServer]:
 def token() -> str:
     """The bearer token of the ``secured`` server."""
     return TOKEN
+
+
+@pytest.fixture(scope="session")
+def start_thread_server() -> Any:
+    """:func:`thread_server`, for tests that need a server with settings of their own."""
+    return thread_server
+
+
+@pytest.fixture(scope="session")
+def start_serve_process() -> Any:
+    """:func:`serve_process`, for tests that need a ``mapmatch serve`` of their own."""
+    return serve_process

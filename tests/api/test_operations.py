@@ -1,0 +1,238 @@
+"""Health, readiness, auth, metrics, access logs, time budget and workers, on real servers."""
+
+from __future__ import annotations
+
+import json
+import re
+import threading
+import time
+from typing import TYPE_CHECKING, Any
+
+import httpx
+import pytest
+
+from api.errors import NotReadyError, UnknownNetworkError
+from api.networks import NetworkRegistry
+from api.settings import Settings
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+
+def _metric(text: str, name: str, **labels: str) -> float:
+    """The value of one sample of the exposition text (0 when absent)."""
+    for line in text.splitlines():
+        if not line.startswith(name + "{") and not line.startswith(name + " "):
+            continue
+        found = dict(re.findall(r'(\w+)="([^"]*)"', line.split("}")[0])) if "{" in line else {}
+        if all(found.get(k) == v for k, v in labels.items()):
+            return float(line.rsplit(" ", 1)[1])
+    return 0.0
+
+
+def test_health_and_readiness(client: httpx.Client) -> None:
+    assert client.get("/healthz").json() == {"status": "alive"}
+    ready = client.get("/readyz")
+    assert ready.status_code == 200
+    assert ready.json() == {"status": "ready", "networks": ["monaco_2020", "west-oakland_us"]}
+
+
+def test_auth_off_needs_no_token(client: httpx.Client) -> None:
+    assert client.get("/v1/networks").status_code == 200
+    assert "securitySchemes" not in client.get("/openapi.json").json()["components"]
+
+
+@pytest.mark.parametrize(
+    ("path", "method"),
+    [
+        ("/v1/networks", "GET"),
+        ("/readyz", "GET"),
+        ("/metrics", "GET"),
+        ("/openapi.json", "GET"),
+        ("/docs", "GET"),
+        ("/v1/match", "POST"),
+    ],
+)
+def test_token_is_required_everywhere_but_healthz(
+    secured, token: str, path: str, method: str
+) -> None:
+    url = secured.base_url + path
+    missing = httpx.request(method, url)
+    assert missing.status_code == 401
+    assert missing.headers["www-authenticate"].startswith("Bearer")
+    assert missing.json()["error"]["code"] == "unauthorized"
+    wrong = httpx.request(method, url, headers={"Authorization": "Bearer nope"})
+    assert wrong.status_code == 401
+    assert "wrong" in wrong.json()["error"]["message"]
+    right = httpx.request(method, url, headers={"Authorization": f"Bearer {token}"})
+    assert right.status_code != 401
+
+
+def test_token_server_matches_and_documents_the_scheme(secured, token: str, trip, bodies) -> None:
+    auth = {"Authorization": f"Bearer {token}"}
+    assert httpx.get(secured.base_url + "/healthz").status_code == 200
+    answer = httpx.post(
+        secured.base_url + "/v1/match", json={"points": bodies.points(trip.trace)}, headers=auth
+    )
+    assert answer.status_code == 200, answer.text
+    spec = httpx.get(secured.base_url + "/openapi.json", headers=auth).json()
+    assert spec["components"]["securitySchemes"]["bearerAuth"]["scheme"] == "bearer"
+    assert spec["paths"]["/healthz"]["get"]["security"] == []
+
+
+def test_metrics_count_requests_points_and_latency(client: httpx.Client, trips, bodies) -> None:
+    before = client.get("/metrics").text
+    for t in trips:
+        assert client.post("/v1/match", json={"points": bodies.points(t.trace)}).status_code == 200
+    client.post("/v1/match", json={"points": []})
+    after = client.get("/metrics").text
+    ok = {"route": "/v1/match", "method": "POST", "status": "200"}
+    name = "mapmatch_http_requests_total"
+    assert _metric(after, name, **ok) - _metric(before, name, **ok) == len(trips)
+    bad = {"route": "/v1/match", "method": "POST", "status": "422"}
+    assert _metric(after, name, **bad) - _metric(before, name, **bad) == 1
+    points = "mapmatch_points_matched_total"
+    assert _metric(after, points) - _metric(before, points) == sum(len(t.trace) for t in trips)
+    latency = "mapmatch_http_request_duration_seconds_count"
+    grown = _metric(after, latency, route="/v1/match", status="200") - _metric(
+        before, latency, route="/v1/match", status="200"
+    )
+    assert grown == len(trips)
+    assert "mapmatch_breaks_total" in after
+    outcome = {"outcome": "invalid_trace"}
+    assert _metric(after, "mapmatch_matches_total", **outcome) >= 1
+
+
+def test_access_log_has_one_json_line_per_request(live, client: httpx.Client, trip, bodies) -> None:
+    request_id = f"test-{time.time_ns()}"
+    body = {"points": bodies.points(trip.trace), "trace_id": "logged"}
+    answer = client.post("/v1/match", json=body, headers={"X-Request-ID": request_id})
+    assert answer.headers["x-request-id"] == request_id
+    deadline = time.monotonic() + 10
+    lines: list[dict[str, Any]] = []
+    while time.monotonic() < deadline and not lines:
+        lines = [
+            json.loads(line)
+            for line in live.log_lines()
+            if request_id in line and line.startswith("{")
+        ]
+        time.sleep(0.05)
+    assert len(lines) == 1
+    line = lines[0]
+    assert line["logger"] == "api.access"
+    assert (line["route"], line["status"], line["method"]) == ("/v1/match", 200, "POST")
+    assert (line["points"], line["trace_id"], line["network"]) == (
+        len(trip.trace),
+        "logged",
+        "monaco_2020",
+    )
+    assert line["duration_ms"] > 0
+
+
+def test_a_match_past_its_budget_answers_504_and_frees_the_worker(
+    start_thread_server, cache_dir: Path, slow_trace, trip, bodies
+) -> None:
+    settings = Settings(
+        cache_dir=str(cache_dir),
+        time_budget_s=0.05,
+        match_threads=1,
+        max_queued=0,
+        access_log=False,
+    )
+    with start_thread_server(settings) as server:
+        url = server.base_url
+        slow = httpx.post(url + "/v1/match", json={"points": bodies.points(slow_trace)}, timeout=60)
+        assert slow.status_code == 504, slow.text
+        assert slow.json()["error"]["code"] == "timeout"
+        # the abandoned match still holds the only thread: the next request is refused at
+        # once, and the event loop answers other routes meanwhile
+        busy = httpx.post(url + "/v1/match", json={"points": bodies.points(trip.trace)}, timeout=60)
+        assert busy.status_code == 503, busy.text
+        assert busy.json()["error"]["code"] == "overloaded"
+        assert busy.headers["retry-after"] == "1"
+        assert httpx.get(url + "/healthz").status_code == 200
+        runner = server.app.state.service.runner
+        deadline = time.monotonic() + 60
+        while runner.in_system and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert runner.in_system == 0  # the thread came back when the match ended
+
+
+def test_waiting_matches_are_bounded(
+    start_thread_server, cache_dir: Path, slow_trace, trip, bodies
+) -> None:
+    settings = Settings(cache_dir=str(cache_dir), match_threads=1, max_queued=0, access_log=False)
+    with start_thread_server(settings) as server:
+        url = server.base_url + "/v1/match"
+        answers: list[httpx.Response] = []
+        first = threading.Thread(
+            target=lambda: answers.append(
+                httpx.post(url, json={"points": bodies.points(slow_trace)}, timeout=60)
+            )
+        )
+        first.start()
+        runner = server.app.state.service.runner
+        deadline = time.monotonic() + 30
+        while runner.in_system == 0 and time.monotonic() < deadline:
+            time.sleep(0.001)
+        second = httpx.post(url, json={"points": bodies.points(trip.trace)}, timeout=60)
+        first.join()
+        assert second.status_code == 503
+        assert second.json()["error"]["code"] == "overloaded"
+        assert answers[0].status_code == 200  # the first one was not disturbed
+
+
+def test_a_network_that_fails_to_load_keeps_the_process_alive(
+    start_thread_server, tmp_path: Path, trip, bodies
+) -> None:
+    missing = tmp_path / "nowhere.osm.pbf"
+    settings = Settings(networks=(str(missing),), cache_dir=str(tmp_path), access_log=False)
+    with start_thread_server(settings, wait=False) as server:
+        url = server.base_url
+        deadline = time.monotonic() + 30
+        ready = httpx.get(url + "/readyz")
+        while ready.json()["error"]["code"] == "not_ready" and time.monotonic() < deadline:
+            time.sleep(0.05)
+            ready = httpx.get(url + "/readyz")
+        assert ready.status_code == 503
+        assert ready.json()["error"]["code"] == "network_unavailable"
+        assert "nowhere.osm.pbf" in ready.json()["error"]["message"]
+        assert httpx.get(url + "/healthz").status_code == 200
+        match = httpx.post(url + "/v1/match", json={"points": bodies.points(trip.trace)})
+        assert match.status_code == 503
+        assert match.json()["error"]["code"] == "network_unavailable"
+
+
+def test_registry_is_not_ready_until_loaded(cache_dir: Path) -> None:
+    registry = NetworkRegistry((), str(cache_dir))
+    with pytest.raises(NotReadyError):
+        registry.get(None)
+    registry.load_all()
+    assert registry.get(None).network_id == "monaco_2020"
+    assert registry.get("monaco_2020").from_cache
+    with pytest.raises(UnknownNetworkError, match="monaco_2020"):
+        registry.get("atlantis")
+
+
+def test_two_workers_share_one_metrics_view(
+    start_serve_process, cache_dir: Path, tmp_path: Path, trip, bodies
+) -> None:
+    args = ["--workers", "2", "--cache-dir", str(cache_dir), "--no-access-log"]
+    with start_serve_process(args, tmp_path / "workers.log") as server:
+        body = {"points": bodies.points(trip.trace)}
+        url = server.base_url + "/v1/match"
+        done = 0
+        deadline = time.monotonic() + 60
+        while done < 12 and time.monotonic() < deadline:
+            # a new connection each: the kernel spreads them over the workers; a worker still
+            # warming up answers 503 not_ready with Retry-After, as a client would retry
+            answer = httpx.post(url, json=body, timeout=60)
+            if answer.status_code == 503 and answer.json()["error"]["code"] == "not_ready":
+                time.sleep(0.1)
+                continue
+            assert answer.status_code == 200, answer.text
+            done += 1
+        for _ in range(3):  # whichever worker answers the scrape, it reports all of them
+            text = httpx.get(server.base_url + "/metrics").text
+            ok = {"route": "/v1/match", "method": "POST", "status": "200"}
+            assert _metric(text, "mapmatch_http_requests_total", **ok) == 12
