@@ -44,6 +44,50 @@ class Candidates:
     def __len__(self) -> int:
         return len(self.edge)
 
+    def take(self, keep: npt.NDArray[np.bool_]) -> Candidates:
+        """
+        The candidates flagged in ``keep`` (one flag per row), fixes unchanged.
+
+        Examples
+        --------
+        >>> c = Candidates(np.array([0, 2, 3]), *(np.arange(3.0),) * 6)
+        >>> c.take(np.array([False, True, True])).ptr.tolist()
+        [0, 1, 2]
+        """
+        point_of = np.repeat(np.arange(len(self.ptr) - 1), self.counts)
+        counts = np.bincount(point_of[keep], minlength=len(self.ptr) - 1)
+        return Candidates(
+            ptr=np.concatenate(([0], np.cumsum(counts))).astype(np.int64),
+            edge=self.edge[keep],
+            offset_m=self.offset_m[keep],
+            distance_m=self.distance_m[keep],
+            x=self.x[keep],
+            y=self.y[keep],
+            bearing_deg=self.bearing_deg[keep],
+        )
+
+    def spread(self, fixes: IntArray, n: int) -> Candidates:
+        """
+        These candidates of ``fixes`` (indices into ``n`` fixes), the other fixes having none.
+
+        Examples
+        --------
+        >>> c = Candidates(np.array([0, 2, 3]), *(np.arange(3.0),) * 6)
+        >>> c.spread(np.array([1, 3]), 4).ptr.tolist()
+        [0, 0, 2, 2, 3]
+        """
+        counts = np.zeros(n, dtype=np.int64)
+        counts[fixes] = self.counts
+        return Candidates(
+            np.concatenate(([0], np.cumsum(counts))).astype(np.int64),
+            self.edge,
+            self.offset_m,
+            self.distance_m,
+            self.x,
+            self.y,
+            self.bearing_deg,
+        )
+
     def subset(self, fixes: IntArray) -> Candidates:
         """
         The candidates of some fixes only, in the order given.

@@ -75,6 +75,7 @@ class MatchConfig:
     max_search_radius_m: float = 200.0
     radius_accuracy_factor: float = 4.0
     max_candidates: int = 16
+    candidate_margin: float = 10.0
     sigma_m: float = 5.0
     max_emission_penalty: float = 8.0
     heading_sigma_deg: float = 25.0
@@ -120,6 +121,7 @@ class MatchConfig:
         )
         non_negative = (
             "max_emission_penalty",
+            "candidate_margin",
             "heading_min_speed_mps",
             "heading_max_penalty",
             "beta_per_s",

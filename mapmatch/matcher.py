@@ -130,12 +130,15 @@ def match(
     x, y = net.project(trace.lon, trace.lat)
     n = len(x)
     radius = search_radii(trace.accuracy_m, n, config)
-    cands = find_candidates(net, x, y, radius, config)
-    if len(cands) == 0:
-        raise NoCandidatesError(trace.trace_id, float(radius.max()))
     sigma = np.full(n, config.sigma_m)
     if trace.accuracy_m is not None:
         sigma = np.fmax(sigma, trace.accuracy_m)
+    # the near-repeats of a stopped or crawling car add nothing but noise: no candidates
+    queried = thin_fixes(x, y, sigma, np.ones(n, dtype=bool), config)
+    q = np.flatnonzero(queried)
+    cands = find_candidates(net, x[q], y[q], radius[q], config).spread(q, n)
+    if len(cands) == 0:
+        raise NoCandidatesError(trace.trace_id, float(radius.max()))
     dt = np.diff(trace.time_s)
     speed = trace.speed_mps
     if speed is None:
@@ -150,11 +153,11 @@ def match(
     outlier = np.zeros(n, dtype=bool)
     travel = _travel_between(fixes, near, config)
     outlier[near] = find_outliers(x[near], y[near], trace.time_s[near], sigma[near], config, travel)
-    lonely = _isolated(~has_cands)
-    keep = thin_fixes(x, y, sigma, has_cands & ~outlier, config)
-    used = np.flatnonzero(keep)
+    lonely = np.zeros(n, dtype=bool)
+    lonely[q] = _isolated(~has_cands[q])
+    used = np.flatnonzero(has_cands & ~outlier)
     # a stretch of fixes with no road nearby (not a lone stray fix) splits the trace
-    missing_before = np.cumsum(~has_cands & ~lonely)
+    missing_before = np.cumsum(queried & ~has_cands & ~lonely)
     cut_after = missing_before[used[1:]] > missing_before[used[:-1]]
     clock = _lap(timings, "selection", clock)
 
@@ -280,6 +283,13 @@ def _solve(
     if fixes.heading_deg is not None:
         weight = heading_weight(fixes.speed_mps, config)
         em += log_heading(fixes.heading_deg[fix_of], cands.bearing_deg, weight[fix_of], config)
+    if config.candidate_margin > 0:
+        best = np.full(n, -np.inf)
+        np.maximum.at(best, point_of, em)
+        keep = em >= best[point_of] - config.candidate_margin
+        cands, em = cands.take(keep), em[keep]
+        point_of = point_of[keep]
+        fix_of = used[point_of]
 
     x, y = fixes.x[used], fixes.y[used]
     step_m = np.hypot(np.diff(x), np.diff(y))
@@ -296,12 +306,24 @@ def _solve(
     step_travel = None if travel is None else (travel[0][pairs.step], travel[1][pairs.step])
     lt = log_transition(gc, route, free_time, kind, step_dt, step_sigma, config, step_travel)
     u_route = uturn_routes(net, cands, pairs)
-    u_time = u_route / net.arrays.edge_speed_mps[cands.edge[pairs.a]]
-    u_kind = np.full(len(kind), ROUTE_UTURN)
-    lu = log_transition(gc, u_route, u_time, u_kind, step_dt, step_sigma, config, step_travel)
-    use_u = lu > lt
-    lt = np.where(use_u, lu, lt)
-    kind = np.where(use_u, ROUTE_UTURN, kind)
+    twins = np.flatnonzero(np.isfinite(u_route))  # a U-turn in place is possible
+    if len(twins):
+        u_route = u_route[twins]
+        u_time = u_route / net.arrays.edge_speed_mps[cands.edge[pairs.a[twins]]]
+        u_travel = None if step_travel is None else (step_travel[0][twins], step_travel[1][twins])
+        lu = log_transition(
+            gc[twins],
+            u_route,
+            u_time,
+            np.full(len(twins), ROUTE_UTURN),
+            step_dt[twins],
+            step_sigma[twins],
+            config,
+            u_travel,
+        )
+        better = lu > lt[twins]
+        lt[twins[better]] = lu[better]
+        kind[twins[better]] = ROUTE_UTURN
     lt[cut_after[pairs.step] | (lt < config.min_log_transition)] = -np.inf
 
     width = max(int(cands.counts.max()) if n else 1, 1)

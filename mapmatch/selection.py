@@ -6,6 +6,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -73,6 +74,17 @@ def find_outliers(
     return out
 
 
+@njit(cache=True, nogil=True)
+def _thin_kernel(x, y, radius, index, keep):  # type: ignore[no-untyped-def]  # pragma: no cover
+    last = index[0]
+    for k in range(1, len(index) - 1):
+        i = index[k]
+        if np.hypot(x[i] - x[last], y[i] - y[last]) < radius[i]:
+            keep[i] = False
+        else:
+            last = i
+
+
 def thin_fixes(
     x: FloatArray, y: FloatArray, sigma_m: FloatArray, usable: BoolArray, config: MatchConfig
 ) -> BoolArray:
@@ -90,16 +102,9 @@ def thin_fixes(
     [True, False, False, True, True]
     """
     keep = usable.copy()
-    if config.thinning_sigmas <= 0:
-        return keep
     index = np.flatnonzero(usable)
-    if len(index) <= 2:
+    if config.thinning_sigmas <= 0 or len(index) <= 2:
         return keep
-    radius = config.thinning_sigmas * sigma_m
-    last = index[0]
-    for i in index[1:-1].tolist():
-        if np.hypot(x[i] - x[last], y[i] - y[last]) < radius[i]:
-            keep[i] = False
-        else:
-            last = i
+    radius = config.thinning_sigmas * np.asarray(sigma_m, dtype=np.float64)
+    _thin_kernel(np.asarray(x, np.float64), np.asarray(y, np.float64), radius, index, keep)
     return keep

@@ -101,6 +101,48 @@ def _nearest_places(
     return np.asarray(order[~(worse_than_prev | worse_than_next)], dtype=np.int64)
 
 
+#: Consecutive query points in one square of this size share one R-tree probe (metres).
+BLOCK_M = 100.0
+
+
+def _point_segment_pairs(
+    tree: rtree_index.Index, x: FloatArray, y: FloatArray, radius: FloatArray
+) -> tuple[IntArray, IntArray]:
+    """
+    (point, segment) pairs whose segment box meets the point's search box, or a little more.
+
+    Runs of consecutive points in the same :data:`BLOCK_M` square (a trace sampled every
+    second is one run for several fixes) share one R-tree probe with their joint search box;
+    every point of a run is paired with every segment found for it. The exact distance test
+    follows in :func:`query_edges`, so the extra pairs only cost arithmetic, while the
+    per-probe cost of the tree is paid once per run instead of once per point.
+    """
+    n = len(x)
+    key = np.floor(x / BLOCK_M) * 1e7 + np.floor(y / BLOCK_M)
+    first = np.ones(n, dtype=bool)
+    first[1:] = key[1:] != key[:-1]
+    starts = np.flatnonzero(first)
+    sizes = np.diff(np.append(starts, n))
+    mins = np.column_stack(
+        (np.minimum.reduceat(x - radius, starts), np.minimum.reduceat(y - radius, starts))
+    )
+    maxs = np.column_stack(
+        (np.maximum.reduceat(x + radius, starts), np.maximum.reduceat(y + radius, starts))
+    )
+    found, counts = tree.intersection_v(mins, maxs)  # type: ignore[no-untyped-call]
+    counts = counts.astype(np.int64)
+    found_start = np.cumsum(counts) - counts
+    per_block = sizes * counts
+    block = np.repeat(np.arange(len(starts)), per_block)
+    k = np.arange(int(per_block.sum()), dtype=np.int64) - np.repeat(
+        np.cumsum(per_block) - per_block, per_block
+    )
+    width = counts[block]
+    point = starts[block] + k // width
+    seg = found[found_start[block] + k % width].astype(np.int64)
+    return point.astype(np.int64), seg
+
+
 def query_edges(
     tree: rtree_index.Index,
     arrays: NetworkArrays,
@@ -129,10 +171,7 @@ def query_edges(
     x = np.asarray(x, dtype=np.float64)
     y = np.asarray(y, dtype=np.float64)
     radius = np.broadcast_to(np.asarray(radius_m, dtype=np.float64), x.shape)
-    mins = np.column_stack((x - radius, y - radius))
-    maxs = np.column_stack((x + radius, y + radius))
-    seg, counts = tree.intersection_v(mins, maxs)  # type: ignore[no-untyped-call]
-    point = np.repeat(np.arange(len(x), dtype=np.int64), counts.astype(np.int64))
+    point, seg = _point_segment_pairs(tree, x, y, radius)
     start = arrays.seg_start[seg]
     ax, ay = arrays.geom_x[start], arrays.geom_y[start]
     dx, dy = arrays.geom_x[start + 1] - ax, arrays.geom_y[start + 1] - ay
