@@ -85,29 +85,22 @@ def _piece_path(net: RoadNetwork, solution: Solution, start: int, stop: int) -> 
 def _segment(net: RoadNetwork, index: int, first: int, last: int, path: _PiecePath) -> Segment:
     arrays = net.arrays
     u, v, key = net.edge_osm_ids(path.edge)
-    edges: list[MatchedEdge] = []
-    xs: list[FloatArray] = []
-    ys: list[FloatArray] = []
-    for i, e in enumerate(path.edge.tolist()):
-        lo, hi = float(path.start_m[i]), float(path.end_m[i])
-        edges.append(
-            MatchedEdge(
-                edge=e,
-                u=int(u[i]),
-                v=int(v[i]),
-                key=int(key[i]),
-                osm_way_ids=(int(arrays.edge_way_id[e]),),
-                length_m=float(arrays.edge_length_m[e]),
-                start_offset_m=lo,
-                end_offset_m=hi,
-            )
+    way = arrays.edge_way_id[path.edge]
+    length = arrays.edge_length_m[path.edge]
+    edges = [
+        MatchedEdge(
+            edge=int(e),
+            u=int(u[i]),
+            v=int(v[i]),
+            key=int(key[i]),
+            osm_way_ids=(int(way[i]),),
+            length_m=float(length[i]),
+            start_offset_m=float(path.start_m[i]),
+            end_offset_m=float(path.end_m[i]),
         )
-        px, py = net.edge_polyline(e, lo, hi)
-        if xs:
-            px, py = px[1:], py[1:]
-        xs.append(px)
-        ys.append(py)
-    lon, lat = net.unproject(np.concatenate(xs), np.concatenate(ys))
+        for i, e in enumerate(path.edge.tolist())
+    ]
+    lon, lat = net.unproject(*net.path_polyline(path.edge, path.start_m, path.end_m))
     return Segment(index=index, first=first, last=last, edges=edges, lon=lon, lat=lat)
 
 

@@ -284,9 +284,9 @@ def _solve(
         weight = heading_weight(fixes.speed_mps, config)
         em += log_heading(fixes.heading_deg[fix_of], cands.bearing_deg, weight[fix_of], config)
     if config.candidate_margin > 0:
-        best = np.full(n, -np.inf)
-        np.maximum.at(best, point_of, em)
-        keep = em >= best[point_of] - config.candidate_margin
+        best_em = np.full(n, -np.inf)
+        np.maximum.at(best_em, point_of, em)
+        keep = em >= best_em[point_of] - config.candidate_margin
         cands, em = cands.take(keep), em[keep]
         point_of = point_of[keep]
         fix_of = used[point_of]

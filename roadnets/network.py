@@ -153,6 +153,37 @@ class RoadNetwork:
         y = np.concatenate(([ends_y[0]], a.geom_y[inner], [ends_y[1]]))
         return x, y
 
+    def path_polyline(
+        self, edge: IntArray, start_m: FloatArray, end_m: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """
+        Vertices (metres) of a path of edge stretches, in order, joints not repeated.
+
+        Stretch ``i`` runs along ``edge[i]`` from ``start_m[i]`` to ``end_m[i]``; its ends are
+        interpolated, the edge's vertices between them kept. Vectorised over the stretches.
+        """
+        a = self.arrays
+        edge = np.asarray(edge, dtype=np.int64)
+        lo, hi = np.asarray(start_m, np.float64), np.asarray(end_m, np.float64)
+        sizes = a.edge_geom_ptr[edge + 1] - a.edge_geom_ptr[edge]
+        owner = np.repeat(np.arange(len(edge)), sizes)
+        vertex = np.repeat(a.edge_geom_ptr[edge] - np.cumsum(sizes) + sizes, sizes) + np.arange(
+            int(sizes.sum())
+        )
+        along = a.geom_cum_m[vertex]
+        inner = (along > lo[owner]) & (along < hi[owner])
+        ends_x, ends_y = self.point_on_edge(np.concatenate((edge, edge)), np.concatenate((lo, hi)))
+        n = len(edge)
+        x = np.concatenate((ends_x[:n], a.geom_x[vertex[inner]], ends_x[n:]))
+        y = np.concatenate((ends_y[:n], a.geom_y[vertex[inner]], ends_y[n:]))
+        key_owner = np.concatenate((np.arange(n), owner[inner], np.arange(n)))
+        key_along = np.concatenate((lo - 1.0, along[inner], hi + 1.0))
+        order = np.lexsort((key_along, key_owner))
+        x, y = x[order], y[order]
+        repeat = np.zeros(len(x), dtype=bool)
+        repeat[1:] = (np.abs(np.diff(x)) < 1e-9) & (np.abs(np.diff(y)) < 1e-9)
+        return x[~repeat], y[~repeat]
+
     def edge_osm_ids(self, edge: IntArray) -> tuple[IntArray, IntArray, IntArray]:
         """OSM ``(u, v, key)`` of each edge (u and v are OSM node ids)."""
         a = self.arrays

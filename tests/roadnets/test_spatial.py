@@ -105,3 +105,23 @@ def test_both_directions_of_a_two_way_road_are_candidates(
     row = int(np.flatnonzero(hits.edge == e)[0])
     assert hits.offset_m[row] + hits.offset_m[twin_row] == pytest.approx(a.edge_length_m[e])
     assert abs(((hits.bearing_deg[row] - hits.bearing_deg[twin_row]) % 360) - 180) < 1e-6
+
+
+def test_path_polyline_joins_edge_stretches(default_net: roadnets.RoadNetwork) -> None:
+    a = default_net.arrays
+    e1 = int(np.flatnonzero(np.diff(a.edge_geom_ptr) > 3)[0])
+    nxt = a.out_edge[a.out_ptr[a.edge_v[e1]] : a.out_ptr[a.edge_v[e1] + 1]]
+    e2 = int(nxt[nxt != a.edge_twin[e1]][0])
+    start, end = 1.0, float(a.edge_length_m[e2]) / 2
+    x, y = default_net.path_polyline(
+        np.array([e1, e2]), np.array([start, 0.0]), np.array([a.edge_length_m[e1], end])
+    )
+    ex, ey = [], []
+    for e, lo, hi in ((e1, start, float(a.edge_length_m[e1])), (e2, 0.0, end)):
+        px, py = default_net.edge_polyline(e, lo, hi)
+        ex.append(px if not ex else px[1:])
+        ey.append(py if not ey else py[1:])
+    assert np.allclose(x, np.concatenate(ex))
+    assert np.allclose(y, np.concatenate(ey))
+    length = float(np.hypot(np.diff(x), np.diff(y)).sum())
+    assert length == pytest.approx(a.edge_length_m[e1] - start + end)
