@@ -51,6 +51,18 @@ against the vehicle's own trip distance.
 Every error answers `{"error": {"code", "message", "field"?, "rows"?}}`; `code` is stable.
 When the server runs with a token, every route but `/healthz` needs
 `Authorization: Bearer <token>`.
+
+**Limits.** Bodies up to `MAPMATCH_MAX_BODY_BYTES` (10 MB; more is 413 `body_too_large`),
+traces up to `MAPMATCH_MAX_POINTS` (100 000; more is 413 `too_many_points`). A match request
+has `MAPMATCH_TIME_BUDGET_S` (30 s) including its wait for one of the worker process's
+`MAPMATCH_MATCH_THREADS` match threads. Past the budget it answers 504 `timeout` (or 503
+`overloaded` if it never got a thread) at once. What that frees: the worker's event loop and
+the connection. It does not stop the computation: Python cannot kill a thread and the matcher
+has no cancellation points, so the match thread finishes its work, throws the result away and
+only then takes the next request. The pool is bounded, so abandoned matches delay other
+matches (503 `overloaded` when the pool and its queue are full) but never pile up threads.
+Matching holds the GIL except in its numba kernels (routing, Viterbi), so a long match also
+slows the other requests of its process; run several workers (`--workers N`) for throughput.
 """
 
 

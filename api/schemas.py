@@ -275,7 +275,22 @@ _FUSED_DESCRIPTION = (
 class MatchRequest(BaseModel):
     """The JSON body of ``POST /v1/match`` (Content-Type ``application/json``)."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {
+                    "trace_id": "monaco-1",
+                    "points": [
+                        {"time": 1700000000, "lat": 43.7369819, "lon": 7.4231825, "speed": 5.0},
+                        {"time": 1700000005, "lat": 43.7369711, "lon": 7.4233494, "speed": 5.2},
+                        {"time": 1700000010, "lat": 43.7368906, "lon": 7.4241148},
+                    ],
+                    "options": {"sigma_m": 6.0},
+                }
+            ]
+        },
+    )
 
     points: list[PointIn] = Field(
         min_length=2,
@@ -346,21 +361,21 @@ class EdgeOut(BaseModel):
 class LineStringGeometry(BaseModel):
     """GeoJSON LineString in WGS84 [lon, lat]."""
 
-    type: Literal["LineString"]
+    type: Literal["LineString"] = Field(description="Always LineString.")
     coordinates: list[list[float]] = Field(description="[lon, lat] pairs in driving order.")
 
 
 class PointGeometry(BaseModel):
     """GeoJSON Point in WGS84 [lon, lat]."""
 
-    type: Literal["Point"]
+    type: Literal["Point"] = Field(description="Always Point.")
     coordinates: list[float] = Field(description="[lon, lat] of the snapped position.")
 
 
 class SegmentProperties(BaseModel):
     """Properties of a segment Feature."""
 
-    kind: Literal["segment"]
+    kind: Literal["segment"] = Field(description="Marks a segment Feature.")
     segment: int = Field(description="0-based index of the segment.")
     point_range: list[int] = Field(description="[first, last] point indices it covers.")
     length_m: float = Field(description="Driven length, metres.")
@@ -370,15 +385,15 @@ class SegmentProperties(BaseModel):
 class SegmentFeature(BaseModel):
     """A connected matched piece of the trace; a break starts a new one."""
 
-    type: Literal["Feature"]
-    geometry: LineStringGeometry
-    properties: SegmentProperties
+    type: Literal["Feature"] = Field(description="Always Feature.")
+    geometry: LineStringGeometry = Field(description="The driven path.")
+    properties: SegmentProperties = Field(description="What the segment covers and drove.")
 
 
 class PointProperties(BaseModel):
     """Properties of a point Feature (one per point, after sorting by time)."""
 
-    kind: Literal["point"]
+    kind: Literal["point"] = Field(description="Marks a point Feature.")
     index: int = Field(description="0-based index of the point after sorting.")
     time: float = Field(description="Epoch seconds.")
     matched: bool = Field(description="Whether the point was placed on a road.")
@@ -397,9 +412,9 @@ class PointProperties(BaseModel):
 class PointFeature(BaseModel):
     """One input point at its snapped position (null geometry when unmatched)."""
 
-    type: Literal["Feature"]
-    geometry: PointGeometry | None
-    properties: PointProperties
+    type: Literal["Feature"] = Field(description="Always Feature.")
+    geometry: PointGeometry | None = Field(description="Snapped position; null if unmatched.")
+    properties: PointProperties = Field(description="How the point was matched.")
 
 
 class DistanceCheckOut(BaseModel):
@@ -445,13 +460,15 @@ class NetworkRef(BaseModel):
 class MatchResponse(BaseModel):
     """A GeoJSON FeatureCollection: one Feature per segment, then one per point."""
 
-    type: Literal["FeatureCollection"]
+    type: Literal["FeatureCollection"] = Field(description="Always FeatureCollection.")
     trace_id: str = Field(description="Name of the trace.")
-    network: NetworkRef
+    network: NetworkRef = Field(description="The network matched on.")
     matched_length_m: float = Field(description="Metres along the matched path, all segments.")
-    distance_check: DistanceCheckOut
+    distance_check: DistanceCheckOut = Field(
+        description="The fused trip distance against the matched length."
+    )
     breaks: list[int] = Field(description="Point indices where the trace was split.")
-    stats: StatsOut
+    stats: StatsOut = Field(description="Counts and timings.")
     features: list[SegmentFeature | PointFeature] = Field(
         description="Segment Features first, then one point Feature per point."
     )
@@ -473,7 +490,7 @@ class ErrorDetail(BaseModel):
 class ErrorResponse(BaseModel):
     """Every 4xx/5xx answer."""
 
-    error: ErrorDetail
+    error: ErrorDetail = Field(description="What went wrong.")
 
 
 class NetworkOut(BaseModel):
@@ -492,17 +509,17 @@ class NetworkOut(BaseModel):
 class NetworksResponse(BaseModel):
     """The networks this service matches on."""
 
-    networks: list[NetworkOut]
+    networks: list[NetworkOut] = Field(description="Every network, the default first.")
 
 
 class HealthResponse(BaseModel):
     """The process is alive."""
 
-    status: Literal["alive"]
+    status: Literal["alive"] = Field(description="Always alive.")
 
 
 class ReadyResponse(BaseModel):
     """Every network is loaded; matches can be served."""
 
-    status: Literal["ready"]
+    status: Literal["ready"] = Field(description="Always ready (503 otherwise).")
     networks: list[str] = Field(description="Ids of the loaded networks.")

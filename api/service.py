@@ -281,7 +281,7 @@ class MatchService:
                 "send epoch seconds or ISO-8601 timestamps of real fixes"
             )
             raise InvalidTraceError(msg, field="time") from None
-        net = self.networks.get(network_id)
+        net = self.networks.for_thread(network_id)
         config = _config(overrides)
         result = mapmatch.match(trace, net, config, fused_distance_m=fused_m)
         content = json.dumps(result.to_geojson(), allow_nan=False, separators=(",", ":"))

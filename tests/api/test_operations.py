@@ -236,3 +236,25 @@ def test_two_workers_share_one_metrics_view(
             text = httpx.get(server.base_url + "/metrics").text
             ok = {"route": "/v1/match", "method": "POST", "status": "200"}
             assert _metric(text, "mapmatch_http_requests_total", **ok) == 12
+
+
+def test_concurrent_matches_do_not_crash_the_worker(
+    live, client: httpx.Client, trips, bodies
+) -> None:
+    # regression: match threads sharing one R-tree (libspatialindex) segfaulted the worker
+    payloads = [{"points": bodies.points(t.trace)} for t in trips]
+    statuses: list[int] = []
+
+    def hammer(seed: int) -> None:
+        with httpx.Client(base_url=live.base_url, timeout=60) as own:
+            for i in range(15):
+                statuses.append(own.post("/v1/match", json=payloads[(seed + i) % 3]).status_code)
+
+    threads = [threading.Thread(target=hammer, args=(n,)) for n in range(16)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert statuses == [200] * 240
+    assert live.process.poll() is None
+    assert client.get("/healthz").status_code == 200
