@@ -134,7 +134,7 @@ class NetworkRegistry:
 
     def for_thread(self, network_id: str | None) -> RoadNetwork:
         """
-        This thread's own copy of a network, for matching (see :meth:`get` for the errors).
+        The calling thread's own copy of a network, for matching (errors as :meth:`get`).
 
         The R-tree (libspatialindex) is not safe to query from several threads at once: shared
         between match threads it crashes the process. So every match thread gets its own

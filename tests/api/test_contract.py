@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import doctest
 import importlib
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import httpx
 import pytest
 
 import roadnets
@@ -20,6 +19,9 @@ from api.errors import (
 )
 from api.settings import Settings
 from mapmatch import OVERRIDABLE, ConfigError, InvalidTraceError, NoCandidatesError, TraceFileError
+
+if TYPE_CHECKING:
+    import httpx
 
 
 def test_error_codes_are_unique_and_4xx_or_5xx() -> None:
