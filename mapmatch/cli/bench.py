@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import os
 from typing import TYPE_CHECKING, Any
 
@@ -40,6 +41,7 @@ def add_parser(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the benchmark and print its table."""
+    logging.getLogger("mapmatch").setLevel(logging.ERROR)  # per-trace verdicts would drown it
     rows = []
     for source in args.network or [None]:
         net = roadnets.load(source)
