@@ -148,13 +148,14 @@ def main() -> None:
     net.rtree  # noqa: B018
     cached = time.perf_counter() - started
     size = sum(f.stat().st_size for f in cache.rglob("*") if f.is_file()) / 2**20
+    peak_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     info = net.info()
     print(
         f"\nGrid city: {info.nodes:,} nodes, {info.edges:,} directed edges, "
         f"{info.road_km:,.0f} km of road; OSM XML {source.stat().st_size / 2**20:.0f} MB; "
         f"compile {cold:.1f} s, compile + write cache {first:.1f} s, cached load {cached:.2f} s; "
         f"cache on disk {size:.0f} MB; RSS {rss_mb():.0f} MB (+{rss_mb() - before:.0f} MB for "
-        f"the networks); peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB; "
+        f"the networks); peak RSS {peak_rss:.0f} MB; "
         "no precomputed path table (bounded Dijkstra per trace)\n"
     )
     print(markdown_table(bench_network(net, SETS, traces=args.traces, repeats=args.repeats)))
