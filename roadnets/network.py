@@ -68,6 +68,8 @@ class RoadNetwork:
     clipped_ways: int = 0
     from_cache: bool = False
     load_s: float = 0.0
+    precomputed: PathTable | None = field(default=None, repr=False)
+    precomputed_bound_m: float = 0.0
 
     @property
     def crs(self) -> str:
@@ -113,8 +115,30 @@ class RoadNetwork:
     def shortest_paths(
         self, sources: npt.NDArray[np.integer[Any]], bounds_m: float | FloatArray
     ) -> PathTable:
-        """Bounded shortest paths from each source node (see :func:`shortest_path_table`)."""
-        return shortest_path_table(self.arrays, sources, np.asarray(bounds_m, dtype=np.float64))
+        """
+        Bounded shortest paths from each source node (see :func:`shortest_path_table`).
+
+        Answered from the table of :meth:`precompute_paths` when every bound fits in it.
+        """
+        bounds = np.asarray(bounds_m, dtype=np.float64)
+        if self.precomputed is not None and bool(np.all(bounds <= self.precomputed_bound_m)):
+            return self.precomputed
+        return shortest_path_table(self.arrays, sources, bounds)
+
+    def precompute_paths(self, bound_m: float) -> PathTable:
+        """
+        Shortest paths from every node to every node within ``bound_m`` (an upper-bounded
+        origin-destination table, as FMM's UBODT), kept for :meth:`shortest_paths`.
+
+        Worth it for batch matching of sparse traces on a small network; its size grows with
+        the number of nodes times the nodes within reach, so measure first
+        (``benchmarks/bench_match.py`` reports both ways).
+        """
+        table = shortest_path_table(
+            self.arrays, np.arange(self.arrays.n_nodes), np.float64(bound_m)
+        )
+        self.precomputed, self.precomputed_bound_m = table, float(bound_m)
+        return table
 
     @cached_property
     def _vertex_position(self) -> FloatArray:

@@ -67,3 +67,21 @@ def test_free_flow_time_uses_the_speed_limits(oakland_net: roadnets.RoadNetwork)
     if dist[0] == pytest.approx(a.edge_length_m[e]):
         assert time[0] == pytest.approx(a.edge_length_m[e] / a.edge_speed_mps[e])
     assert np.all(time <= dist / a.edge_speed_mps.min() + 1e-9)
+
+
+def test_a_precomputed_table_answers_when_the_bounds_fit(oakland_net: roadnets.RoadNetwork) -> None:
+    a = oakland_net.arrays
+    sources = np.arange(a.n_nodes)
+    fresh = oakland_net.shortest_paths(sources, 300.0)
+    try:
+        table = oakland_net.precompute_paths(500.0)
+        assert oakland_net.shortest_paths(sources[:3], 400.0) is table
+        assert oakland_net.shortest_paths(sources[:3], 600.0) is not table
+        targets = np.tile(sources, len(sources))
+        repeated = np.repeat(sources, len(sources))
+        d_fresh, *_ = fresh.lookup(repeated, targets)
+        d_table, *_ = table.lookup(repeated, targets)
+        near = np.isfinite(d_fresh)
+        assert np.allclose(d_fresh[near], d_table[near])
+    finally:
+        oakland_net.precomputed = None
