@@ -127,15 +127,17 @@ class RoadNetwork:
 
     def precompute_paths(self, bound_m: float) -> PathTable:
         """
-        Shortest paths from every node to every node within ``bound_m`` (an upper-bounded
-        origin-destination table, as FMM's UBODT), kept for :meth:`shortest_paths`.
+        Shortest paths from every node to every node within ``bound_m``, kept for reuse.
+
+        An upper-bounded origin-destination table, as FMM's UBODT; :meth:`shortest_paths`
+        answers from it whenever the bounds asked for fit.
 
         Worth it for batch matching of sparse traces on a small network; its size grows with
         the number of nodes times the nodes within reach, so measure first
         (``benchmarks/bench_match.py`` reports both ways).
         """
         table = shortest_path_table(
-            self.arrays, np.arange(self.arrays.n_nodes), np.float64(bound_m)
+            self.arrays, np.arange(self.arrays.n_nodes), np.asarray(bound_m, dtype=np.float64)
         )
         self.precomputed, self.precomputed_bound_m = table, float(bound_m)
         return table
