@@ -811,9 +811,8 @@ def _parse_time(values: object, chk: _Checker) -> FloatArray:
         todo = np.isnan(num) & s.notna().to_numpy()
         out = num
         if todo.any():
-            dt = pd.to_datetime(s[todo], utc=True, format="ISO8601", errors="coerce")
             out = num.copy()
-            out[todo] = ((dt - epoch) / one_s).to_numpy(dtype=np.float64, na_value=np.nan)
+            out[todo] = _iso_to_epoch_s(s[todo])
         _check_not_ms(np.where(todo, np.nan, num), chk)
         raw = s
     bad = np.flatnonzero(~np.isfinite(out))
@@ -826,6 +825,34 @@ def _parse_time(values: object, chk: _Checker) -> FloatArray:
             fix="give ISO-8601 text (2024-05-01T08:00:00Z; no zone = UTC) or epoch seconds",
         )
     return out
+
+
+def _iso_to_epoch_s(text: pd.Series[Any]) -> FloatArray:
+    """
+    ISO-8601 text to epoch seconds (NaN for text that is no time).
+
+    Works at microsecond resolution, so times outside pandas' nanosecond range (1677-2262)
+    neither overflow nor crash.
+    """
+    try:
+        dt = pd.to_datetime(text, utc=True, format="ISO8601", errors="coerce")
+        stamps = dt.dt.tz_localize(None).to_numpy(dtype="datetime64[us]")
+    except (pd.errors.OutOfBoundsDatetime, OverflowError, ValueError):
+        stamps = np.array([_one_iso(value) for value in text], dtype="datetime64[us]")
+    out = stamps.astype(np.int64) / 1e6
+    out[np.isnat(stamps)] = np.nan
+    return np.asarray(out, dtype=np.float64)
+
+
+def _one_iso(value: object) -> str:
+    """One ISO-8601 time as naive UTC text numpy can read, or ``"NaT"``."""
+    try:
+        stamp = pd.Timestamp(str(value))
+    except (ValueError, OverflowError, pd.errors.OutOfBoundsDatetime):
+        return "NaT"
+    if stamp.tzinfo is not None:
+        stamp = stamp.tz_convert("UTC").tz_localize(None)
+    return str(stamp.isoformat())
 
 
 def _check_not_ms(epoch_s: FloatArray, chk: _Checker) -> None:

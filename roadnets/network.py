@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import TYPE_CHECKING, Any
@@ -55,6 +56,9 @@ class RoadNetwork:
     """
     A compiled, routable, spatially indexed directed road network.
 
+    Safe to share between threads: the R-tree (libspatialindex, not thread-safe itself) is
+    queried under a lock; everything else is read-only arrays.
+
     Build one with :func:`roadnets.load`. Metric work happens in :attr:`crs` (the UTM zone of
     the network's centre); positions given to and returned from users are WGS84 lon/lat.
     """
@@ -70,6 +74,7 @@ class RoadNetwork:
     load_s: float = 0.0
     precomputed: PathTable | None = field(default=None, repr=False)
     precomputed_bound_m: float = 0.0
+    _rtree_lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
     @property
     def crs(self) -> str:
@@ -110,7 +115,15 @@ class RoadNetwork:
             Keep at most this many directed edges per point.
         """
         radius = np.asarray(radius_m, dtype=np.float64)
-        return query_edges(self.rtree, self.arrays, x, y, radius, max_per_point=max_per_point)
+        return query_edges(
+            self.rtree,
+            self.arrays,
+            x,
+            y,
+            radius,
+            max_per_point=max_per_point,
+            lock=self._rtree_lock,
+        )
 
     def shortest_paths(
         self, sources: npt.NDArray[np.integer[Any]], bounds_m: float | FloatArray

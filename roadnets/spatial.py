@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -106,7 +107,11 @@ BLOCK_M = 100.0
 
 
 def _point_segment_pairs(
-    tree: rtree_index.Index, x: FloatArray, y: FloatArray, radius: FloatArray
+    tree: rtree_index.Index,
+    x: FloatArray,
+    y: FloatArray,
+    radius: FloatArray,
+    lock: AbstractContextManager[Any] | None = None,
 ) -> tuple[IntArray, IntArray]:
     """
     (point, segment) pairs whose segment box meets the point's search box, or a little more.
@@ -129,7 +134,8 @@ def _point_segment_pairs(
     maxs = np.column_stack(
         (np.maximum.reduceat(x + radius, starts), np.maximum.reduceat(y + radius, starts))
     )
-    found, counts = tree.intersection_v(mins, maxs)  # type: ignore[no-untyped-call]
+    with lock or nullcontext():
+        found, counts = tree.intersection_v(mins, maxs)  # type: ignore[no-untyped-call]
     counts = counts.astype(np.int64)
     found_start = np.cumsum(counts) - counts
     per_block = sizes * counts
@@ -151,6 +157,7 @@ def query_edges(
     radius_m: FloatArray,
     *,
     max_per_point: int | None = None,
+    lock: AbstractContextManager[Any] | None = None,
 ) -> EdgeHits:
     """
     Every directed edge within a radius of each point, with its projection.
@@ -167,11 +174,14 @@ def query_edges(
         Search radius per point (or one value broadcast to all), metres.
     max_per_point
         Keep only this many nearest directed edges per point.
+    lock
+        Held around the R-tree probe: libspatialindex indexes must not be queried from two
+        threads at once.
     """
     x = np.asarray(x, dtype=np.float64)
     y = np.asarray(y, dtype=np.float64)
     radius = np.broadcast_to(np.asarray(radius_m, dtype=np.float64), x.shape)
-    point, seg = _point_segment_pairs(tree, x, y, radius)
+    point, seg = _point_segment_pairs(tree, x, y, radius, lock)
     start = arrays.seg_start[seg]
     ax, ay = arrays.geom_x[start], arrays.geom_y[start]
     dx, dy = arrays.geom_x[start + 1] - ax, arrays.geom_y[start + 1] - ay

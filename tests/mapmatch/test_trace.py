@@ -448,3 +448,21 @@ def test_time_is_strictly_increasing_after_validation() -> None:
     tr = make(time=[2, 2, 1, 0])
     assert np.all(np.diff(tr.time_s) > 0)
     assert math.isclose(tr.time_s[-1], 2.0)
+
+
+def test_issue_5_times_beyond_2262_parse_without_overflow() -> None:
+    # pandas stores nanoseconds by default, which end in 2262; times must not crash validation
+    trace = Trace(
+        time=["2404-04-04T13:08:28Z", "2404-04-04T13:08:29Z"],
+        lon=[7.42, 7.421],
+        lat=[43.73, 43.731],
+    )
+    assert trace.time_s[0] == 13_703_864_908.0  # datetime(2404, 4, 4, 13, 8, 28, UTC)
+    assert trace.time_s[1] - trace.time_s[0] == 1.0
+
+
+def test_unparseable_time_names_its_row() -> None:
+    with pytest.raises(InvalidTraceError) as caught:
+        Trace(time=["2024-04-04T13:08:28Z", "yesterday"], lon=[7.42, 7.421], lat=[43.73, 43.731])
+    assert caught.value.field == "time"
+    assert caught.value.rows == (1,)

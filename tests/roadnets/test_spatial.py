@@ -125,3 +125,19 @@ def test_path_polyline_joins_edge_stretches(default_net: roadnets.RoadNetwork) -
     assert np.allclose(y, np.concatenate(ey))
     length = float(np.hypot(np.diff(x), np.diff(y)).sum())
     assert length == pytest.approx(a.edge_length_m[e1] - start + end)
+
+
+def test_issue_5_concurrent_queries_from_many_threads_agree(default_net: roadnets.RoadNetwork) -> None:
+    # libspatialindex crashes when one index is probed from several threads at once
+    from concurrent.futures import ThreadPoolExecutor
+
+    a = default_net.arrays
+    rng = np.random.default_rng(5)
+    x = rng.uniform(a.geom_x.min(), a.geom_x.max(), 2000)
+    y = rng.uniform(a.geom_y.min(), a.geom_y.max(), 2000)
+    expected = default_net.nearby_edges(x, y, 50.0)
+    with ThreadPoolExecutor(8) as pool:
+        results = list(pool.map(lambda _: default_net.nearby_edges(x, y, 50.0), range(32)))
+    for hits in results:
+        assert np.array_equal(hits.edge, expected.edge)
+        assert np.array_equal(hits.offset_m, expected.offset_m)
