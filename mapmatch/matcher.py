@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -157,18 +158,16 @@ def match(
     lonely[q] = _isolated(~has_cands[q])
     used = np.flatnonzero(has_cands & ~outlier)
     # a stretch of fixes with no road nearby (not a lone stray fix) splits the trace
-    missing_before = np.cumsum(queried & ~has_cands & ~lonely)
-    cut_after = missing_before[used[1:]] > missing_before[used[:-1]]
+    missing_before = np.cumsum(queried & ~has_cands & ~lonely, dtype=np.int64)
+    cut_after = _cuts(used, missing_before)
     clock = _lap(timings, "selection", clock)
 
     solution = _solve(net, fixes, cands, used, cut_after, config)
     repairs = 0
-    while solution.breaks and repairs < config.max_break_repairs:
-        repaired = _repair_one_break(net, fixes, cands, solution, cut_after, config)
-        repairs += 1
-        if repaired is None:
-            break
-        solution, cut_after = repaired
+    if solution.breaks and config.max_break_repairs:
+        repaired = _repair_breaks(net, fixes, cands, solution, missing_before, config)
+        if repaired is not None:
+            solution, repairs = repaired
     clock = _lap(timings, "hmm", clock)
 
     assembled = assemble(net, trace, fixes.x, fixes.y, solution, outlier)
@@ -200,7 +199,7 @@ def match(
     )
     return MatchResult(
         trace_id=trace.trace_id,
-        network={"id": net.network_id, "source": net.source, "crs": net.crs},
+        network={"id": net.network_id, "source": Path(net.source).name, "crs": net.crs},
         segments=assembled.segments,
         points=points,
         breaks=[s.first for s in assembled.segments[1:]],
@@ -366,26 +365,44 @@ def _travel_between(
     return travel, slack
 
 
-def _repair_one_break(
+def _cuts(used: IntArray, missing_before: IntArray) -> BoolArray:
+    """Where a stretch of fixes with no road nearby lies between consecutive used fixes."""
+    return np.asarray(missing_before[used[1:]] > missing_before[used[:-1]], dtype=bool)
+
+
+def _repair_breaks(
     net: RoadNetwork,
     fixes: Fixes,
     cands: Candidates,
     solution: Solution,
-    cut_after: BoolArray,
+    missing_before: IntArray,
     config: MatchConfig,
-) -> tuple[Solution, BoolArray] | None:
-    """Leave out the fix at (or just before) a break if that joins the pieces."""
+) -> tuple[Solution, int] | None:
+    """
+    Join pieces by leaving out the fix at (or just before) a break.
+
+    For each of the first ``max_break_repairs`` breaks that is not a stretch without roads,
+    the fix at the break, else the one before, is left out when the fixes on either side of it
+    can be connected (a two-fix trellis, so each try costs next to nothing); the whole trace
+    is then solved once more. ``None`` when that does not reduce the number of breaks.
+    """
     used = solution.used
-    for start in solution.breaks:
+    cut_after = _cuts(used, missing_before)
+    drops: list[int] = []
+    for start in solution.breaks[: config.max_break_repairs]:
         if cut_after[start - 1]:
             continue  # a stretch without roads: a real break
         for drop in (start, start - 1):
-            if drop <= 0 or drop >= len(used) - 1:
+            if drop <= 0 or drop >= len(used) - 1 or drop in drops or drop - 1 in drops:
                 continue
-            trial_used = np.delete(used, drop)
-            trial_cut = np.delete(cut_after, min(drop, len(cut_after) - 1))
-            trial_cut[drop - 1] = cut_after[drop - 1] or cut_after[min(drop, len(cut_after) - 1)]
-            trial = _solve(net, fixes, cands, trial_used, trial_cut, config)
-            if len(trial.breaks) < len(solution.breaks):
-                return trial, trial_cut
-    return None
+            pair = used[[drop - 1, drop + 1]]
+            if not _solve(net, fixes, cands, pair, _cuts(pair, missing_before), config).breaks:
+                drops.append(drop)
+                break
+    if not drops:
+        return None
+    kept = np.delete(used, drops)
+    trial = _solve(net, fixes, cands, kept, _cuts(kept, missing_before), config)
+    if len(trial.breaks) >= len(solution.breaks):
+        return None
+    return trial, len(drops)

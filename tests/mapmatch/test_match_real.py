@@ -94,3 +94,33 @@ def test_every_fix_of_a_clean_trace_lands_near_its_true_position(
     error = np.hypot(x - tx, y - ty)
     assert np.median(error) < 3.0
     assert np.percentile(error, 95) < 10.0
+
+
+def test_issue_5_many_breaks_cost_a_bounded_number_of_solves(
+    default_net: roadnets.RoadNetwork, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # several trips glued into one trace: every jump is a break that cannot be repaired;
+    # repairs used to re-solve the whole trace per try (16 s for 3,600 points)
+    import pandas as pd
+
+    from mapmatch import matcher
+
+    parts, start = [], 0.0
+    for trip in simulate_trips(default_net, SimulationConfig(route_length_m=1500), count=5, seed=3):
+        frame = trip.trace.to_dataframe().drop(columns=["odometer"])
+        frame["time"] = frame["time"] - frame["time"].iloc[0] + start
+        start = float(frame["time"].iloc[-1]) + 1.0
+        parts.append(frame)
+    trace = mapmatch.Trace.from_dataframe(pd.concat(parts), trace_id="glued")
+    calls: list[int] = []
+    solve = matcher._solve
+
+    def counting(*args: object, **kwargs: object) -> object:
+        calls.append(len(args[3]))  # type: ignore[arg-type]
+        return solve(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(matcher, "_solve", counting)
+    result = mapmatch.match(trace, default_net)
+    assert len(result.breaks) == 4
+    full_solves = [n for n in calls if n > 2]
+    assert len(full_solves) <= 2  # the first solve and at most one after the repairs
