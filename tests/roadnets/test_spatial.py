@@ -127,7 +127,9 @@ def test_path_polyline_joins_edge_stretches(default_net: roadnets.RoadNetwork) -
     assert length == pytest.approx(a.edge_length_m[e1] - start + end)
 
 
-def test_issue_5_concurrent_queries_from_many_threads_agree(default_net: roadnets.RoadNetwork) -> None:
+def test_issue_5_concurrent_queries_from_many_threads_agree(
+    default_net: roadnets.RoadNetwork,
+) -> None:
     # libspatialindex crashes when one index is probed from several threads at once
     from concurrent.futures import ThreadPoolExecutor
 
