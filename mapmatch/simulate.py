@@ -198,7 +198,8 @@ def _fastest_route(net: RoadNetwork, rng: np.random.Generator, length_m: float) 
     The fastest route from a random edge to a random edge about ``length_m`` of road away.
 
     Free-flow time plus 5 s per turn of more than 45 degrees, banned turns obeyed, no U-turn
-    but at a dead end; ``None`` if nothing that far can be reached.
+    but at a dead end. On a network too small for that length, the farthest reachable edge;
+    ``None`` if even that is closer than ``min(0.3 * length_m, 200 m)``.
     """
     a = net.arrays
     weights = a.edge_length_m / a.edge_length_m.sum()
@@ -230,9 +231,12 @@ def _fastest_route(net: RoadNetwork, rng: np.random.Generator, length_m: float) 
                 previous[nxt] = edge
                 heapq.heappush(heap, (new, nxt))
     ends = [e for e, r in road.items() if 0.7 * length_m <= r <= 1.3 * length_m]
-    if not ends:
-        return None
-    edge = ends[int(rng.integers(len(ends)))]
+    if ends:
+        edge = ends[int(rng.integers(len(ends)))]
+    else:  # a small network: the farthest place the start can reach, if far enough
+        edge = max(road, key=road.__getitem__)
+        if road[edge] < min(0.3 * length_m, 200.0):
+            return None
     route = [edge]
     while edge != start:
         edge = previous[edge]
