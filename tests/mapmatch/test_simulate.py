@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import itertools
 import json
 from pathlib import Path
 
@@ -16,7 +17,7 @@ def test_truth_is_a_connected_route_of_the_stated_length(default_net: roadnets.R
     trip = simulate_trip(default_net, SimulationConfig(), seed=12)
     a = default_net.arrays
     edges = [e.edge for e in trip.edges]
-    for first, second in zip(edges[:-1], edges[1:], strict=True):
+    for first, second in itertools.pairwise(edges):
         assert a.edge_v[first] == a.edge_u[second]
     driven = sum(e.end_offset_m - e.start_offset_m for e in trip.edges)
     assert driven == pytest.approx(trip.length_m, abs=0.01)
@@ -32,7 +33,7 @@ def test_simulated_routes_obey_turn_restrictions(default_net: roadnets.RoadNetwo
         default_net, SimulationConfig(route_length_m=3000), count=15, seed=1
     ):
         edges = [e.edge for e in trip.edges]
-        assert not banned & set(zip(edges[:-1], edges[1:], strict=True))
+        assert not banned & set(itertools.pairwise(edges))
 
 
 def test_the_same_seed_gives_the_same_trip(default_net: roadnets.RoadNetwork) -> None:
