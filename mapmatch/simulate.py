@@ -193,13 +193,16 @@ def _random_route(net: RoadNetwork, rng: np.random.Generator, length_m: float) -
     return route if total >= min(length_m, 200.0) else None
 
 
-def _fastest_route(net: RoadNetwork, rng: np.random.Generator, length_m: float) -> list[int] | None:
+def _fastest_route(
+    net: RoadNetwork, rng: np.random.Generator, length_m: float, *, allow_short: bool = False
+) -> list[int] | None:
     """
     The fastest route from a random edge to a random edge about ``length_m`` of road away.
 
     Free-flow time plus 5 s per turn of more than 45 degrees, banned turns obeyed, no U-turn
-    but at a dead end. On a network too small for that length, the farthest reachable edge;
-    ``None`` if even that is closer than ``min(0.3 * length_m, 200 m)``.
+    but at a dead end. ``None`` when no edge that far can be reached; with ``allow_short``
+    (a network too small for that length) the farthest reachable edge instead, unless even
+    that is closer than ``min(0.3 * length_m, 200 m)``.
     """
     a = net.arrays
     weights = a.edge_length_m / a.edge_length_m.sum()
@@ -233,10 +236,12 @@ def _fastest_route(net: RoadNetwork, rng: np.random.Generator, length_m: float) 
     ends = [e for e, r in road.items() if 0.7 * length_m <= r <= 1.3 * length_m]
     if ends:
         edge = ends[int(rng.integers(len(ends)))]
-    else:  # a small network: the farthest place the start can reach, if far enough
+    elif allow_short:  # a small network: the farthest place the start can reach, if far enough
         edge = max(road, key=road.__getitem__)
         if road[edge] < min(0.3 * length_m, 200.0):
             return None
+    else:
+        return None
     route = [edge]
     while edge != start:
         edge = previous[edge]
@@ -328,9 +333,10 @@ def simulate_trip(
     """
     rng = np.random.default_rng(seed)
     route = None
-    for _ in range(50):
+    for attempt in range(50):
         if cfg.route == "fastest":
-            route = _fastest_route(net, rng, cfg.route_length_m)
+            # a network too small for the length gets the longest routes it has, at the end
+            route = _fastest_route(net, rng, cfg.route_length_m, allow_short=attempt >= 40)
         else:
             route = _random_route(net, rng, cfg.route_length_m)
         if route is not None:

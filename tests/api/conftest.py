@@ -221,9 +221,9 @@ def long_trace(trips: list[SimulatedTrip], copies: int) -> Trace:
 
 @pytest.fixture(scope="session")
 def slow_trace(trips: list[SimulatedTrip]) -> Trace:
-    """About 1 200 points with breaks between the trips: a match of about half a second."""
-    trace = long_trace(trips, copies=2)
-    assert len(trace) > 1000
+    """About 30 000 points with breaks between the trips: a match of about half a second."""
+    trace = long_trace(trips, copies=50)
+    assert len(trace) > 20_000
     assert np.all(np.diff(trace.time_s) > 0)
     return trace
 
