@@ -378,10 +378,10 @@ def many_traces(
 ) -> Path:
     folder = tmp_path_factory.mktemp("many")
     cfg = SimulationConfig(interval_s=1.0, route_length_m=1500.0, noise_m=4.0)
-    trips = simulate_trips(default_net, cfg, count=60, seed=5)
+    trips = simulate_trips(default_net, cfg, count=120, seed=5)
     frames = [_frame(t.trace, t.trace.trace_id) for t in trips]
-    pd.concat(frames[:30]).to_csv(folder / "first.csv", index=False)
-    pd.concat(frames[30:]).to_csv(folder / "second.csv", index=False)
+    pd.concat(frames[:60]).to_csv(folder / "first.csv", index=False)
+    pd.concat(frames[60:]).to_csv(folder / "second.csv", index=False)
     return folder
 
 
@@ -420,7 +420,7 @@ def test_sigkill_then_resume_gives_the_uninterrupted_outputs(
         proc.wait(timeout=30)
     assert still_running, "the run finished before it could be killed; give it more traces"
     finished = [p for p in out.glob("trip-*.csv") if not p.name.endswith(".edges.csv")]
-    assert 0 < len(finished) < 60
+    assert 0 < len(finished) < 120
 
     resumed = subprocess.run([*argv, "--resume"], capture_output=True, timeout=120, check=False)
     assert resumed.returncode == 0, resumed.stderr.decode()
