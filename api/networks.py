@@ -50,11 +50,8 @@ class NetworkRegistry:
         self._nets: dict[str, RoadNetwork] = {}
         self._infos: dict[str, NetworkInfo] = {}
         self._default: str | None = None
-        self._sources_by_id: dict[str, str | None] = {}
         self._ready = threading.Event()
         self._failure: str | None = None
-        self._local = threading.local()
-        self._load_lock = threading.Lock()
 
     @property
     def ready(self) -> bool:
@@ -86,7 +83,6 @@ class NetworkRegistry:
                     raise RoadNetworkError(msg)
                 _warm_up(net)
                 self._nets[net.network_id] = net
-                self._sources_by_id[net.network_id] = source
                 self._infos[net.network_id] = net.info()
                 self._default = self._default or net.network_id
         except Exception as exc:
@@ -130,30 +126,6 @@ class NetworkRegistry:
                 f"{', '.join(map(repr, self._nets))} (see GET /v1/networks)"
             )
             raise UnknownNetworkError(msg, field="network")
-        return net
-
-    def for_thread(self, network_id: str | None) -> RoadNetwork:
-        """
-        The calling thread's own copy of a network, for matching (errors as :meth:`get`).
-
-        The R-tree (libspatialindex) is not safe to query from several threads at once: shared
-        between match threads it crashes the process. So every match thread gets its own
-        :class:`RoadNetwork` over the same memory-mapped arrays (loaded from the cache, so the
-        arrays are not copied) with its own R-tree, built on the thread's first match. (Without
-        a usable cache folder every thread compiles its own copy: slower, still correct.)
-        """
-        shared = self.get(network_id)
-        copies: dict[str, RoadNetwork] | None = getattr(self._local, "nets", None)
-        if copies is None:
-            copies = {}
-            self._local.nets = copies
-        net = copies.get(shared.network_id)
-        if net is None:
-            with self._load_lock:
-                net = roadnets.load(
-                    self._sources_by_id[shared.network_id], cache_dir=self._cache_dir
-                )
-            copies[shared.network_id] = net
         return net
 
     def describe(self) -> list[dict[str, object]]:

@@ -30,7 +30,6 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final, TypeVar
 
 import numpy as np
-import pandas as pd
 from pydantic import ValidationError
 
 import mapmatch
@@ -266,22 +265,13 @@ class MatchService:
             Any problem of the request; :mod:`api.errors` maps it to its answer.
         """
         started = time.perf_counter()
-        try:
-            if fmt == "json":
-                trace, network_id, fused_m, overrides = self._from_json(body, query)
-            else:
-                trace = self._from_file(body, fmt, query)
-                network_id, fused_m = query.network, query.fused_distance_m
-                overrides = query.options()
-        except pd.errors.OutOfBoundsDatetime as exc:
-            # Workaround: mapmatch.trace lets pandas' OutOfBoundsDatetime escape for timestamps
-            # outside pandas' nanosecond range instead of raising InvalidTraceError.
-            msg = (
-                f"a time is outside the years 1677..2262 this service can represent ({exc}); "
-                "send epoch seconds or ISO-8601 timestamps of real fixes"
-            )
-            raise InvalidTraceError(msg, field="time") from None
-        net = self.networks.for_thread(network_id)
+        if fmt == "json":
+            trace, network_id, fused_m, overrides = self._from_json(body, query)
+        else:
+            trace = self._from_file(body, fmt, query)
+            network_id, fused_m = query.network, query.fused_distance_m
+            overrides = query.options()
+        net = self.networks.get(network_id)
         config = _config(overrides)
         result = mapmatch.match(trace, net, config, fused_distance_m=fused_m)
         content = json.dumps(result.to_geojson(), allow_nan=False, separators=(",", ":"))
