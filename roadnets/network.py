@@ -163,14 +163,27 @@ class RoadNetwork:
         sizes = np.diff(a.edge_geom_ptr)
         return np.asarray(a.geom_cum_m + np.repeat(base, sizes), dtype=np.float64)
 
-    def point_on_edge(self, edge: IntArray, offset_m: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Positions (metres) at ``offset_m`` along each ``edge``, vectorised."""
+    def segment_at(self, edge: IntArray, offset_m: FloatArray) -> IntArray:
+        """
+        Index of the first vertex of the geometry segment holding each offset, vectorised.
+
+        Offsets are clipped to their edge, so the segment is always one of the edge's own.
+        """
         a = self.arrays
         edge = np.asarray(edge, dtype=np.int64)
         offset = np.clip(np.asarray(offset_m, dtype=np.float64), 0.0, a.edge_length_m[edge])
         base = self._vertex_position[a.edge_geom_ptr[edge]]
         i = np.searchsorted(self._vertex_position, base + offset, side="right") - 1
-        i = np.clip(i, a.edge_geom_ptr[edge], a.edge_geom_ptr[edge + 1] - 2)
+        return np.asarray(
+            np.clip(i, a.edge_geom_ptr[edge], a.edge_geom_ptr[edge + 1] - 2), dtype=np.int64
+        )
+
+    def point_on_edge(self, edge: IntArray, offset_m: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Positions (metres) at ``offset_m`` along each ``edge``, vectorised."""
+        a = self.arrays
+        edge = np.asarray(edge, dtype=np.int64)
+        offset = np.clip(np.asarray(offset_m, dtype=np.float64), 0.0, a.edge_length_m[edge])
+        i = self.segment_at(edge, offset)
         seg = a.geom_cum_m[i + 1] - a.geom_cum_m[i]
         with np.errstate(invalid="ignore", divide="ignore"):
             t = np.where(seg > 0, (offset - a.geom_cum_m[i]) / seg, 0.0)

@@ -55,10 +55,7 @@ def road_bearing_deg(net: RoadNetwork, edge: npt.ArrayLike, offset_m: npt.ArrayL
     e = np.atleast_1d(np.asarray(edge, dtype=np.int64))
     off = np.atleast_1d(np.asarray(offset_m, dtype=np.float64))
     e, off = np.broadcast_arrays(e, off)
-    lo = a.edge_geom_ptr[e]
-    hi = a.edge_geom_ptr[e + 1]
-    i = _segment_index(net, e, off)
-    i = np.clip(i, lo, hi - 2)
+    i = net.segment_at(e, off)
     x0, y0 = a.geom_x[i], a.geom_y[i]
     x1, y1 = a.geom_x[i + 1], a.geom_y[i + 1]
     if e.size == 0:
@@ -71,18 +68,6 @@ def road_bearing_deg(net: RoadNetwork, edge: npt.ArrayLike, offset_m: npt.ArrayL
         np.asarray(lon1, dtype=np.float64),
         np.asarray(lat1, dtype=np.float64),
     )
-
-
-def _segment_index(net: RoadNetwork, edge: IntArray, offset_m: FloatArray) -> IntArray:
-    """Index of the first vertex of the geometry segment holding each offset."""
-    a = net.arrays
-    out = np.empty(edge.shape[0], dtype=np.int64)
-    for k in range(edge.shape[0]):
-        lo, hi = int(a.edge_geom_ptr[edge[k]]), int(a.edge_geom_ptr[edge[k] + 1])
-        cum = a.geom_cum_m[lo:hi]
-        j = int(np.searchsorted(cum, offset_m[k], side="right")) - 1
-        out[k] = lo + min(max(j, 0), hi - lo - 2)
-    return out
 
 
 def _bearing_deg(
