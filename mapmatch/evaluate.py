@@ -1,8 +1,18 @@
-"""Accuracy of matches against ground truth (Newson & Krumm's route mismatch and more)."""
+"""
+Accuracy of matches against ground truth: route mismatch, length, U-turns, loops, verdict.
+
+Newson & Krumm's route mismatch, the matched length and what spoils it (U-turns and loops the
+vehicle never drove), and the distance verdict. Route mismatch does not see a piece of road
+driven forward twice (it is "covered" either way), so a match can have a small mismatch and a
+length several per cent too long; the length error and the spurious U-turn and loop counts are
+first-class figures here.
+"""
 
 from __future__ import annotations
 
-from collections import defaultdict
+import itertools
+import math
+from collections import Counter, defaultdict
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -11,9 +21,64 @@ import numpy as np
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
 
-__all__ = ["TripScore", "score_geojson", "summarise"]
+__all__ = ["TripScore", "Turnbacks", "count_turnbacks", "score_geojson", "summarise"]
 
 _Key = tuple[int, int, int]
+
+
+@dataclass(frozen=True, slots=True)
+class Turnbacks:
+    """U-turns and loops of a path of directed edges (see :func:`count_turnbacks`)."""
+
+    uturns: int
+    loops: int
+
+
+def _twins(a: Mapping[str, Any], b: Mapping[str, Any]) -> bool:
+    """Two reversed edges are one road's two directions: same way and same length."""
+    ways_a, ways_b = a.get("osm_way_ids"), b.get("osm_way_ids")
+    if ways_a and ways_b and not set(ways_a) & set(ways_b):
+        return False
+    len_a, len_b = a.get("length_m"), b.get("length_m")
+    if len_a is None or len_b is None:
+        return True
+    return abs(float(len_a) - float(len_b)) <= 0.01 + 1e-4 * float(len_a)
+
+
+def count_turnbacks(edges: Sequence[Mapping[str, Any]]) -> Turnbacks:
+    """
+    Count the U-turns and loops of one connected path of directed edges.
+
+    ``edges`` are in driving order, as a segment's ``edges`` in the match GeoJSON or the
+    ``edges`` of a truth record (``u``, ``v``, ``key``, ``start_offset_m``,
+    ``end_offset_m``, optionally ``osm_way_ids``). Stretches of zero length are skipped (a
+    path that starts exactly at the end of an edge). A **U-turn** is an edge followed by its
+    reverse twin, ``(u, v)`` then ``(v, u)`` on the same OSM way and of the same length
+    (a two-edge ring of one way, ``(u, v)`` then ``(v, u)`` round a small roundabout, is not
+    one): turning back at a node, or in the middle of the road (the matcher's mid-road
+    U-turn is the stretch up to the turn on one edge and the stretch back on its twin); a
+    stretch driven backwards (end offset below start offset) counts as one too. A **loop**
+    is a directed edge ``(u, v, key)`` driven again: each repeat counts once (round a ring
+    three times: two loops).
+
+    Examples
+    --------
+    >>> def e(u, v, lo=0.0, hi=100.0):
+    ...     return {"u": u, "v": v, "key": 0, "osm_way_ids": [7], "length_m": 100.0,
+    ...             "start_offset_m": lo, "end_offset_m": hi}
+    >>> count_turnbacks([e(1, 2, 0, 60), e(2, 1, 40, 100), e(1, 3)])  # back mid-road
+    Turnbacks(uturns=1, loops=0)
+    >>> count_turnbacks([e(1, 2), e(2, 3), e(3, 1), e(1, 2)])  # round a ring again
+    Turnbacks(uturns=0, loops=1)
+    """
+    path = [e for e in edges if float(e["end_offset_m"]) != float(e["start_offset_m"])]
+    uturns = sum(1 for e in path if float(e["end_offset_m"]) < float(e["start_offset_m"]))
+    for a, b in itertools.pairwise(path):
+        au, av, bu, bv = int(a["u"]), int(a["v"]), int(b["u"]), int(b["v"])
+        if au == bv and av == bu and au != av and _twins(a, b):
+            uturns += 1
+    driven = Counter((int(e["u"]), int(e["v"]), int(e["key"])) for e in path)
+    return Turnbacks(uturns=uturns, loops=sum(n - 1 for n in driven.values()))
 
 
 @dataclass(frozen=True, slots=True)
@@ -25,6 +90,14 @@ class TripScore:
     wrongly missed) / true length, with lengths compared edge by edge (directed) along the
     driven offsets. ``point_accuracy`` is the share of fixes matched to their true directed
     edge. ``length_error`` is (matched - true) / true.
+
+    ``uturns`` / ``loops`` count the match's U-turns and repeated directed edges
+    (:func:`count_turnbacks`, per segment), ``true_uturns`` / ``true_loops`` the truth's
+    own; ``spurious_uturns`` / ``spurious_loops`` what the match has beyond them.
+    ``verdict`` is the match's distance verdict (``distance_source`` the fused distance's
+    source, ``fused_length_m`` its value) and ``true_verdict`` the verdict that same fused
+    distance gets against the true length in the same band: a correct verdict is one that
+    equals it (empty strings when the result has no distance check).
     """
 
     trace_id: str
@@ -37,10 +110,37 @@ class TripScore:
     point_accuracy: float
     length_error: float
     breaks: int
+    uturns: int = 0
+    loops: int = 0
+    true_uturns: int = 0
+    true_loops: int = 0
+    spurious_uturns: int = 0
+    spurious_loops: int = 0
+    verdict: str = ""
+    true_verdict: str = ""
+    distance_source: str = ""
+    fused_length_m: float = math.nan
+
+    @property
+    def spurious(self) -> bool:
+        """The match holds a U-turn or a loop the vehicle did not drive."""
+        return self.spurious_uturns > 0 or self.spurious_loops > 0
+
+    @property
+    def verdict_ok(self) -> bool:
+        """The distance verdict is the one the true length would give."""
+        return bool(self.verdict) and self.verdict == self.true_verdict
 
     def to_dict(self) -> dict[str, Any]:
         """Plain dictionary."""
         return asdict(self)
+
+
+def _band_verdict(relative: float, band: Sequence[float]) -> str:
+    """``over`` / ``under`` / ``pass`` of a relative error against a band (low, high)."""
+    if math.isnan(relative):
+        return "incomplete"
+    return "over" if relative > band[1] else "under" if relative < band[0] else "pass"
 
 
 def _intervals(edges: Sequence[Mapping[str, Any]]) -> dict[_Key, list[tuple[float, float]]]:
@@ -88,12 +188,10 @@ def score_geojson(result: Mapping[str, Any], truth: Mapping[str, Any]) -> TripSc
     (10.0, 0.0, 0.1)
     """
     features = result.get("features", [])
-    matched_edges = [
-        e
-        for f in features
-        if f["properties"].get("kind") == "segment"
-        for e in f["properties"]["edges"]
+    segments = [
+        f["properties"]["edges"] for f in features if f["properties"].get("kind") == "segment"
     ]
+    matched_edges = [e for edges in segments for e in edges]
     truth_spans = _intervals(truth["edges"])
     matched_spans = _intervals(matched_edges)
     true_len = sum(_union_length(v) for v in truth_spans.values())
@@ -113,6 +211,16 @@ def score_geojson(result: Mapping[str, Any], truth: Mapping[str, Any]) -> TripSc
     )
     n_points = len(point_edges) or len(points)
     reference = float(truth.get("length_m", true_len)) or true_len
+    turns = [count_turnbacks(edges) for edges in segments]
+    uturns, loops = sum(t.uturns for t in turns), sum(t.loops for t in turns)
+    true_turns = count_turnbacks(truth["edges"])
+    check = result.get("distance_check") or {}
+    verdict, true_verdict, source, fused = "", "", "", math.nan
+    if check:
+        verdict, source = str(check["verdict"]), str(check["source"])
+        fused = float(check["fused_length_m"])
+        relative = (fused - reference) / reference if reference > 0 else math.nan
+        true_verdict = _band_verdict(relative, check["band"])
     return TripScore(
         trace_id=str(result.get("trace_id", truth.get("trace_id", ""))),
         points=n_points,
@@ -124,18 +232,52 @@ def score_geojson(result: Mapping[str, Any], truth: Mapping[str, Any]) -> TripSc
         point_accuracy=right / n_points if n_points else float("nan"),
         length_error=(matched_len - reference) / reference if reference > 0 else float("nan"),
         breaks=len(result.get("breaks", [])),
+        uturns=uturns,
+        loops=loops,
+        true_uturns=true_turns.uturns,
+        true_loops=true_turns.loops,
+        spurious_uturns=max(uturns - true_turns.uturns, 0),
+        spurious_loops=max(loops - true_turns.loops, 0),
+        verdict=verdict,
+        true_verdict=true_verdict,
+        distance_source=source,
+        fused_length_m=fused,
     )
 
 
 def summarise(scores: Sequence[TripScore]) -> dict[str, float]:
-    """Mean and median route mismatch, mean point accuracy, mean and max |length error|."""
+    """
+    Figures over many trips (NaN where no trip qualifies).
+
+    ``mismatch_mean`` / ``_median`` / ``_p95`` route mismatch; ``point_accuracy`` mean share
+    of fixes on their true edge; ``length_error_mean`` signed mean, ``length_error_abs_max``
+    / ``_abs_p95`` of ``|length error|``; ``within_1pct`` / ``within_2pct`` share of trips
+    whose matched length is within 1 % / 2 % of the true one; ``spurious_share`` share of
+    trips with a U-turn or loop the truth does not have, ``spurious_uturns`` /
+    ``spurious_loops`` their totals; ``verdict_trips`` trips whose fused distance is an
+    odometer reading and that have no break, ``verdict_accuracy`` the share of those whose
+    verdict is the one the true length gives.
+    """
     mismatch = np.array([s.mismatch for s in scores])
+    error = np.abs([s.length_error for s in scores])
+    judged = [s for s in scores if s.distance_source == "odometer" and s.breaks == 0]
     return {
         "traces": float(len(scores)),
         "points": float(sum(s.points for s in scores)),
         "mismatch_mean": float(np.nanmean(mismatch)),
         "mismatch_median": float(np.nanmedian(mismatch)),
+        "mismatch_p95": float(np.nanpercentile(mismatch, 95)),
         "point_accuracy": float(np.nanmean([s.point_accuracy for s in scores])),
         "length_error_mean": float(np.nanmean([s.length_error for s in scores])),
-        "length_error_abs_max": float(np.nanmax(np.abs([s.length_error for s in scores]))),
+        "length_error_abs_max": float(np.nanmax(error)),
+        "length_error_abs_p95": float(np.nanpercentile(error, 95)),
+        "within_1pct": float(np.mean(error <= 0.01)),
+        "within_2pct": float(np.mean(error <= 0.02)),
+        "spurious_share": float(np.mean([s.spurious for s in scores])),
+        "spurious_uturns": float(sum(s.spurious_uturns for s in scores)),
+        "spurious_loops": float(sum(s.spurious_loops for s in scores)),
+        "verdict_trips": float(len(judged)),
+        "verdict_accuracy": (
+            float(np.mean([s.verdict_ok for s in judged])) if judged else float("nan")
+        ),
     }

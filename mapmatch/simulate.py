@@ -9,8 +9,10 @@ and speed with their own noise, and an odometer with a small scale error.
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -19,21 +21,28 @@ import numpy as np
 import numpy.typing as npt
 
 from mapmatch.errors import ConfigError
+from mapmatch.evaluate import count_turnbacks
 from mapmatch.trace import Trace
 
 if TYPE_CHECKING:
     import os
+    from collections.abc import Callable, Iterable
 
     import pandas as pd
 
     from roadnets import RoadNetwork
 
 __all__ = [
+    "INPUT_CLASSES",
+    "TRUE_COLUMNS",
     "SimulatedTrip",
     "SimulationConfig",
     "TruthEdge",
+    "TruthEvent",
     "simulate_trip",
     "simulate_trips",
+    "strip_to_class",
+    "with_columns",
     "write_trips",
 ]
 
@@ -41,6 +50,19 @@ FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
 _DENSE_HZ = 10.0
+_EPOCH_S = 1.7e9  # simulated trips start at this epoch second
+
+
+#: The trace columns each input class keeps besides time and position; each class adds to the
+#: one before it: plain GPS, + the receiver's accuracy, + heading and speed, + the odometer.
+INPUT_CLASSES: dict[str, tuple[str, ...]] = {
+    "positions": (),
+    "accuracy": ("accuracy",),
+    "heading_speed": ("accuracy", "heading", "speed"),
+    "odometer": ("accuracy", "heading", "speed", "odometer"),
+}
+#: The optional trace columns a simulated trip carries.
+TRUE_COLUMNS = ("heading", "speed", "accuracy", "odometer")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -48,52 +70,302 @@ class SimulationConfig:
     """
     How trips are driven and observed.
 
-    ``interval_s`` sampling interval; ``noise_m`` 1-sigma position error per axis;
-    ``noise_correlation_s`` time constant of the position error (0: white, as raw GNSS; a few
-    seconds looks like a Kalman filter's output); ``outlier_rate`` share of fixes displaced by
-    ``outlier_m``; ``outage_rate`` chance per minute of an outage of ``outage_s`` without
-    fixes; ``heading_noise_deg`` / ``speed_noise_mps`` 1-sigma noise; ``odometer_scale_error``
-    maximum absolute scale error of the odometer (drawn uniformly per trip);
-    ``route_length_m`` target length of each trip; ``route`` how trips are chosen:
-    ``fastest`` (the fastest route between a random start and a random end about
-    ``route_length_m`` away, as real trips are) or ``random_walk`` (meandering: straight on
-    preferred at every junction); ``stop_probability`` chance of stopping at
-    a junction, for ``stop_s`` seconds (drawn up to it).
+    Every realistic-noise option below is off by default; :meth:`realistic` switches them on
+    with the values of a phone or a low-cost telematics box in a city, :meth:`noise_free`
+    gives the exact truth.
+
+    Sampling and route
+        ``interval_s`` sampling interval (0.1 gives the 10 Hz truth); ``route_length_m``
+        target length of each trip; ``route`` how trips are chosen: ``fastest`` (the fastest
+        route between a random start and a random end about ``route_length_m`` away, as real
+        trips are; no U-turn but at a dead end) or ``random_walk`` (meandering: straight on
+        preferred at every junction).
+    Position noise
+        ``noise_m`` stationary 1-sigma position error per axis. White by default; correlated
+        in time as an AR(1) process when ``noise_correlation_per_s`` (correlation of the error
+        one second apart, e.g. 0.95 for raw GNSS, whose error wanders slowly) or, the same
+        thing as a time constant, ``noise_correlation_s`` (tau: correlation ``exp(-dt / tau)``;
+        a few seconds looks like a Kalman filter's output) is set; give at most one. The
+        stationary std stays ``noise_m`` whatever the correlation and the gaps between fixes.
+        ``outlier_rate`` share of fixes displaced by ``outlier_m`` in a random direction.
+    Urban canyons
+        ``canyon_per_km`` stretches per km of route (0: none) where multipath pulls every fix
+        ``canyon_bias_m`` to one side of the road (perpendicular to the driving direction,
+        the side drawn per stretch, constant over it), for a duration drawn uniformly from
+        ``canyon_s`` seconds. The reported ``accuracy`` does not see the bias.
+    Stops
+        ``junction_stop_share`` share of the route's real junctions (nodes joining three or
+        more neighbours) where the car stops: it brakes at ``decel_mps2``, stands for a
+        duration drawn uniformly from ``junction_stop_s`` seconds while the receiver keeps
+        reporting noisy fixes (true speed 0, position fixed), and pulls away at
+        ``accel_mps2``. ``stop_probability`` / ``stop_s``: the older, brief stops at any node
+        between two edges (junction or not), 2 s up to ``stop_s``.
+    Heading and speed
+        ``heading_noise_deg`` / ``speed_noise_mps`` 1-sigma noise; ``heading_noise_slow_deg``
+        adds ``heading_noise_slow_deg * exp(-v / 1 m/s)`` to the heading's 1-sigma, so a slow
+        or standing car's heading is nearly random (3 + 87 exp(-v) degrees: a GNSS course
+        over ground degrades below walking speed).
+    Outages
+        ``outage_per_km`` outages per km of route (0: none) of a duration drawn uniformly from
+        ``outage_range_s`` seconds without fixes (tunnels, garages); the older
+        ``outage_rate`` is the chance per minute of an outage of ``outage_s``.
+    Odometer
+        The odometer reads ``1 + odometer_bias + U(-odometer_scale_error,
+        +odometer_scale_error)`` times the distance driven (``odometer_bias`` 0.02: a meter
+        2 % high; the random part is drawn per trip).
+    Columns
+        ``input_class`` which optional columns the trace keeps (:data:`INPUT_CLASSES`:
+        ``positions``, ``accuracy``, ``heading_speed``, ``odometer`` = all); the truth is the
+        same whatever it strips.
     """
 
     interval_s: float = 1.0
     noise_m: float = 5.0
     noise_correlation_s: float = 0.0
+    noise_correlation_per_s: float = 0.0
     outlier_rate: float = 0.0
     outlier_m: float = 40.0
     outage_rate: float = 0.0
     outage_s: float = 30.0
+    outage_per_km: float = 0.0
+    outage_range_s: tuple[float, float] = (20.0, 60.0)
+    canyon_per_km: float = 0.0
+    canyon_s: tuple[float, float] = (10.0, 30.0)
+    canyon_bias_m: float = 20.0
     heading_noise_deg: float = 5.0
+    heading_noise_slow_deg: float = 0.0
     speed_noise_mps: float = 0.3
     odometer_scale_error: float = 0.005
+    odometer_bias: float = 0.0
     route_length_m: float = 3000.0
     stop_probability: float = 0.15
     stop_s: float = 20.0
+    junction_stop_share: float = 0.0
+    junction_stop_s: tuple[float, float] = (5.0, 40.0)
     accel_mps2: float = 1.5
     decel_mps2: float = 2.5
     lateral_accel_mps2: float = 2.0
     route: str = "fastest"
+    input_class: str = "odometer"
 
     def __post_init__(self) -> None:
         for name in ("interval_s", "route_length_m", "accel_mps2", "decel_mps2"):
             if not getattr(self, name) > 0:
                 msg = f"{name} must be > 0 (got {getattr(self, name)!r})"
                 raise ConfigError(msg)
-        for name in ("outlier_rate", "stop_probability"):
+        for name in ("outlier_rate", "stop_probability", "junction_stop_share"):
             if not 0 <= getattr(self, name) <= 1:
                 msg = f"{name} must be within 0..1 (got {getattr(self, name)!r})"
                 raise ConfigError(msg)
+        for name in (
+            "noise_m",
+            "outage_rate",
+            "noise_correlation_s",
+            "outage_per_km",
+            "canyon_per_km",
+            "canyon_bias_m",
+            "heading_noise_deg",
+            "heading_noise_slow_deg",
+            "speed_noise_mps",
+            "odometer_scale_error",
+        ):
+            if not getattr(self, name) >= 0:
+                msg = f"{name} must be >= 0 (got {getattr(self, name)!r})"
+                raise ConfigError(msg)
+        for name in ("outage_range_s", "canyon_s", "junction_stop_s"):
+            lo, hi = getattr(self, name)
+            if not 0 < lo <= hi:
+                msg = f"{name} must be a range (low, high) with 0 < low <= high (got {(lo, hi)!r})"
+                raise ConfigError(msg)
+        if not 0 <= self.noise_correlation_per_s < 1:
+            msg = (
+                "noise_correlation_per_s must be within 0..1 (1 excluded: the error would never "
+                f"change; got {self.noise_correlation_per_s!r})"
+            )
+            raise ConfigError(msg)
+        if self.noise_correlation_per_s > 0 and self.noise_correlation_s > 0:
+            msg = (
+                "give noise_correlation_per_s or noise_correlation_s, not both (got "
+                f"{self.noise_correlation_per_s!r} and {self.noise_correlation_s!r}); "
+                "correlation per second rho = exp(-1 / tau)"
+            )
+            raise ConfigError(msg)
+        if not self.odometer_bias > -1:
+            msg = f"odometer_bias must be > -1 (got {self.odometer_bias!r}); 0.02 is 2 % high"
+            raise ConfigError(msg)
         if self.route not in ("fastest", "random_walk"):
             msg = f"route must be 'fastest' or 'random_walk' (got {self.route!r})"
             raise ConfigError(msg)
-        if self.noise_m < 0 or self.outage_rate < 0 or self.noise_correlation_s < 0:
-            msg = "noise_m, outage_rate and noise_correlation_s must be >= 0"
+        if self.input_class not in INPUT_CLASSES:
+            msg = f"input_class must be one of {sorted(INPUT_CLASSES)} (got {self.input_class!r})"
             raise ConfigError(msg)
+
+    @property
+    def correlation_time_s(self) -> float:
+        """Time constant tau of the position error's AR(1) process (0: white noise)."""
+        if self.noise_correlation_per_s > 0:
+            return -1.0 / math.log(self.noise_correlation_per_s)
+        return self.noise_correlation_s
+
+    def replace(self, **changes: Any) -> SimulationConfig:
+        """A copy with some fields changed (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+    @classmethod
+    def noise_free(cls, **changes: Any) -> SimulationConfig:
+        """
+        Exact observations; ``changes`` set other fields (``interval_s`` ...).
+
+        No position, heading or speed noise, no outliers or outages, an exact odometer, every
+        column. The ``accuracy`` column then reads 1 m (the smallest it reports). Stops stay as
+        configured: a stop is driving, not noise.
+
+        Examples
+        --------
+        >>> cfg = SimulationConfig.noise_free(interval_s=15.0)
+        >>> cfg.noise_m, cfg.heading_noise_deg, cfg.odometer_scale_error, cfg.interval_s
+        (0.0, 0.0, 0.0, 15.0)
+        """
+        exact: dict[str, Any] = {
+            "noise_m": 0.0,
+            "outlier_rate": 0.0,
+            "outage_rate": 0.0,
+            "outage_per_km": 0.0,
+            "canyon_per_km": 0.0,
+            "heading_noise_deg": 0.0,
+            "heading_noise_slow_deg": 0.0,
+            "speed_noise_mps": 0.0,
+            "odometer_scale_error": 0.0,
+            "odometer_bias": 0.0,
+        }
+        return cls(**{**exact, **changes})
+
+    @classmethod
+    def realistic(cls, **changes: Any) -> SimulationConfig:
+        """
+        Raw-GNSS-like city observations; ``changes`` set other fields (``interval_s`` ...).
+
+        AR(1) position error with correlation 0.95 per second and 6 m stationary std per
+        axis; 2 % outliers of 40 m; urban canyons 0.5 per km of 10-30 s pulling the fixes
+        20 m to one side; stops at a third of the junctions of 5-40 s (no other stops);
+        heading noise 3 + 87 exp(-v) degrees, speed noise 0.3 m/s; outages 0.3 per km of
+        20-60 s; the odometer reads exactly 2 % high.
+
+        Examples
+        --------
+        >>> cfg = SimulationConfig.realistic(interval_s=15.0)
+        >>> cfg.noise_correlation_per_s, cfg.odometer_bias, cfg.interval_s
+        (0.95, 0.02, 15.0)
+        """
+        rough: dict[str, Any] = {
+            "noise_m": 6.0,
+            "noise_correlation_per_s": 0.95,
+            "outlier_rate": 0.02,
+            "canyon_per_km": 0.5,
+            "canyon_s": (10.0, 30.0),
+            "canyon_bias_m": 20.0,
+            "stop_probability": 0.0,
+            "junction_stop_share": 1.0 / 3.0,
+            "junction_stop_s": (5.0, 40.0),
+            "heading_noise_deg": 3.0,
+            "heading_noise_slow_deg": 87.0,
+            "speed_noise_mps": 0.3,
+            "outage_per_km": 0.3,
+            "outage_range_s": (20.0, 60.0),
+            "odometer_bias": 0.02,
+            "odometer_scale_error": 0.0,
+        }
+        return cls(**{**rough, **changes})
+
+
+def with_columns(trace: Trace, columns: Iterable[str]) -> Trace:
+    """
+    A copy of ``trace`` that keeps only the named optional columns.
+
+    ``columns`` names any of ``heading``, ``speed``, ``accuracy``, ``odometer``; the rest are
+    dropped (a column the trace does not have stays absent). Time, position and id are kept.
+
+    Raises
+    ------
+    ConfigError
+        An unknown column name.
+    """
+    keep = set(columns)
+    unknown = sorted(keep - set(TRUE_COLUMNS))
+    if unknown:
+        msg = f"unknown column(s) {unknown}; a trace's optional columns are {list(TRUE_COLUMNS)}"
+        raise ConfigError(msg)
+    return Trace(
+        time=trace.time_s,
+        lon=trace.lon,
+        lat=trace.lat,
+        heading=trace.heading_deg if "heading" in keep else None,
+        speed=trace.speed_mps if "speed" in keep else None,
+        accuracy=trace.accuracy_m if "accuracy" in keep else None,
+        odometer=trace.odometer_m if "odometer" in keep else None,
+        trace_id=trace.trace_id,
+    )
+
+
+def strip_to_class(trace: Trace, input_class: str) -> Trace:
+    """
+    ``trace`` with the columns of one input class of :data:`INPUT_CLASSES` only.
+
+    Raises
+    ------
+    ConfigError
+        An unknown input class.
+
+    Examples
+    --------
+    >>> tr = Trace(time=[0, 1], lon=[7.42, 7.43], lat=[43.73] * 2, speed=[5, 6], odometer=[0, 6])
+    >>> plain = strip_to_class(tr, "positions")
+    >>> plain.speed_mps is None, plain.odometer_m is None
+    (True, True)
+    """
+    if input_class not in INPUT_CLASSES:
+        msg = f"input class must be one of {sorted(INPUT_CLASSES)} (got {input_class!r})"
+        raise ConfigError(msg)
+    return with_columns(trace, INPUT_CLASSES[input_class])
+
+
+@dataclass(frozen=True, slots=True)
+class TruthEvent:
+    """
+    A stretch of a trip the truth records: a stop, an outage or an urban canyon.
+
+    ``start_s``/``end_s`` epoch seconds (as the trace's times); ``first_fix``/``last_fix``
+    the trace indices inside it (a stop's standing fixes, a canyon's biased ones; -1 when no
+    fix fell inside), for an outage the last fix before and the first after it (-1 at the
+    trace's ends); ``distance_m`` where along the route it began; ``side`` a canyon's side
+    (+1 right, -1 left of the driving direction) and ``bias_m`` its lateral pull.
+    """
+
+    kind: str
+    start_s: float
+    end_s: float
+    first_fix: int
+    last_fix: int
+    distance_m: float
+    side: int = 0
+    bias_m: float = 0.0
+
+    @property
+    def duration_s(self) -> float:
+        """Seconds from start to end."""
+        return self.end_s - self.start_s
+
+    def to_dict(self) -> dict[str, Any]:
+        """As ``truth.jsonl`` writes it."""
+        out: dict[str, Any] = {
+            "time": [round(self.start_s, 3), round(self.end_s, 3)],
+            "fixes": [self.first_fix, self.last_fix],
+            "distance_m": round(self.distance_m, 3),
+        }
+        if self.kind == "canyon":
+            out["side"] = "right" if self.side > 0 else "left"
+            out["bias_m"] = self.bias_m
+        return out
 
 
 @dataclass(frozen=True, slots=True)
@@ -131,6 +403,10 @@ class SimulatedTrip:
     ``trace`` (``true_uvk`` the edge as OSM ``u, v, key``); ``dense_*`` the true trajectory at
     10 Hz (time, lon, lat, heading, speed and cumulative distance), for the fusion front-end;
     ``edges`` the driven route from the first fix to the last and ``length_m`` its length.
+    ``stops``, ``outages`` and ``canyons`` list those stretches of the trip;
+    ``uturns`` and ``loops`` count the true route's own U-turns (only at dead ends) and
+    directed edges driven more than once, as :func:`mapmatch.evaluate.count_turnbacks` counts
+    them on a match, so a benchmark can tell a spurious one from a driven one.
     """
 
     trace: Trace
@@ -150,17 +426,45 @@ class SimulatedTrip:
     odometer_scale: float
     geometry_lon: FloatArray
     geometry_lat: FloatArray
+    stops: tuple[TruthEvent, ...] = ()
+    outages: tuple[TruthEvent, ...] = ()
+    canyons: tuple[TruthEvent, ...] = ()
+    uturns: int = 0
+    loops: int = 0
 
     def truth_record(self) -> dict[str, Any]:
-        """The truth as one JSON object (a line of ``truth.jsonl``)."""
+        """
+        The truth as one JSON object (a line of ``truth.jsonl``).
+
+        ``edges`` the driven route, ``point_edges`` each fix's true ``[u, v, key]``;
+        ``columns`` the optional columns the trace carries; ``stops`` / ``outages`` /
+        ``canyons`` the stretches (``time`` epoch-second range, ``fixes`` index range, see
+        :class:`TruthEvent`); ``uturns`` / ``loops`` the true route's own.
+        """
         coords = np.column_stack((self.geometry_lon, self.geometry_lat)).round(7).tolist()
+        columns = [
+            name
+            for name, values in (
+                ("heading", self.trace.heading_deg),
+                ("speed", self.trace.speed_mps),
+                ("accuracy", self.trace.accuracy_m),
+                ("odometer", self.trace.odometer_m),
+            )
+            if values is not None
+        ]
         return {
             "trace_id": self.trace.trace_id,
             "length_m": round(self.length_m, 3),
             "odometer_scale": self.odometer_scale,
+            "columns": columns,
             "geometry": {"type": "LineString", "coordinates": coords},
             "edges": [e.to_dict() for e in self.edges],
             "point_edges": self.true_uvk.tolist(),
+            "stops": [e.to_dict() for e in self.stops],
+            "outages": [e.to_dict() for e in self.outages],
+            "canyons": [e.to_dict() for e in self.canyons],
+            "uturns": self.uturns,
+            "loops": self.loops,
         }
 
 
@@ -286,9 +590,16 @@ def _speed_profile(
     total_m: float,
     cfg: SimulationConfig,
     rng: np.random.Generator,
+    extra: np.random.Generator,
 ) -> tuple[FloatArray, FloatArray, list[tuple[float, float]]]:
-    """Target speed on a 1 m grid along the route, and the stops (distance, seconds)."""
+    """
+    Target speed on a 1 m grid along the route, and the stops (distance, seconds).
+
+    ``rng`` draws what the older options always drew (so their trips stay as they were);
+    ``extra`` draws the junction stops.
+    """
     a = net.arrays
+    junction = _junction_nodes(net) if cfg.junction_stop_share > 0 else None
     grid = np.arange(0.0, total_m + 1.0, 1.0)
     edge_idx = np.clip(np.searchsorted(edge_start, grid, side="right") - 1, 0, len(route) - 1)
     limit = a.edge_speed_mps[np.asarray(route)][edge_idx] * rng.uniform(0.75, 0.95)
@@ -304,6 +615,13 @@ def _speed_profile(
         if rng.random() < cfg.stop_probability:
             cap[round(at)] = 0.0
             stops.append((float(at), float(rng.uniform(2.0, cfg.stop_s))))
+        if (
+            junction is not None
+            and junction[a.edge_v[route[i - 1]]]
+            and extra.random() < cfg.junction_stop_share
+        ):
+            cap[round(at)] = 0.0
+            stops.append((float(at), float(extra.uniform(*cfg.junction_stop_s))))
     cap[0] = 0.0
     cap[-1] = 0.0
     v2 = cap**2
@@ -312,6 +630,76 @@ def _speed_profile(
     for i in range(len(v2) - 2, -1, -1):  # brake ahead
         v2[i] = min(v2[i], v2[i + 1] + 2 * cfg.decel_mps2)
     return grid, np.sqrt(v2), stops
+
+
+def _junction_nodes(net: RoadNetwork) -> npt.NDArray[np.bool_]:
+    """Nodes joined to three or more distinct neighbours (in or out): real junctions."""
+    a = net.arrays
+    u, v = a.edge_u.astype(np.int64), a.edge_v.astype(np.int64)
+    pairs = np.unique(np.column_stack((np.concatenate((u, v)), np.concatenate((v, u)))), axis=0)
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    return np.bincount(pairs[:, 0], minlength=a.n_nodes) >= 3
+
+
+def _standing_knots(
+    grid: FloatArray, t_grid: FloatArray, stops: list[tuple[float, float]]
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """
+    Time knots of the drive with each stop's dwell as a standstill.
+
+    Returns the arrival time at each grid point (dwells before it included) and the knots
+    ``(time, distance)`` to interpolate the position by time: a stop at grid point ``k``
+    holds the distance at ``grid[k]`` from arrival to departure, so the car stands still
+    (speed 0) instead of creeping.
+    """
+    if not stops:
+        return t_grid, t_grid, grid
+    index = np.array([round(at) for at, _ in stops], dtype=np.int64)
+    dwell = np.array([d for _, d in stops])
+    order = np.argsort(index)
+    index, dwell = index[order], dwell[order]
+    shift = np.zeros(len(grid))
+    later = index + 1 < len(grid)
+    np.add.at(shift, index[later] + 1, dwell[later])
+    arrive = t_grid + np.cumsum(shift)
+    knot_t = np.insert(arrive, index + 1, arrive[index] + dwell)
+    knot_s = np.insert(grid, index + 1, grid[index])
+    return arrive, knot_t, knot_s
+
+
+def _events_along(
+    rng: np.random.Generator,
+    per_km: float,
+    duration_s: tuple[float, float],
+    total_m: float,
+    arrive_s: Callable[[float], float],
+    distance_at: Callable[[float], float],
+) -> list[tuple[float, float, float]]:
+    """
+    Stretches placed along the route as a Poisson process: ``(start_s, end_s, distance_m)``.
+
+    Starts are ``per_km`` per km of road apart on average (exponential gaps, counted from the
+    end of the previous stretch, so stretches never overlap); each lasts a duration drawn
+    uniformly from ``duration_s``.
+    """
+    out: list[tuple[float, float, float]] = []
+    if per_km <= 0:
+        return out
+    at = 0.0
+    while True:
+        at += float(rng.exponential(1000.0 / per_km))
+        if at >= total_m:
+            return out
+        start = arrive_s(at)
+        end = start + float(rng.uniform(*duration_s))
+        out.append((start, end, at))
+        at = distance_at(end)
+
+
+def _inside(t: FloatArray, start: float, end: float) -> tuple[int, int]:
+    """First and last index of ``t`` within ``[start, end]``, ``(-1, -1)`` if none."""
+    idx = np.flatnonzero((t >= start) & (t <= end))
+    return (int(idx[0]), int(idx[-1])) if len(idx) else (-1, -1)
 
 
 def simulate_trip(
@@ -349,15 +737,20 @@ def simulate_trip(
     edge_start = np.concatenate(([0.0], np.cumsum(lengths)[:-1]))
     x, y, s_vert = _route_polyline(net, route)
     total = float(s_vert[-1])
-    grid, v_grid, stops = _speed_profile(net, route, edge_start, total, cfg, rng)
-
-    # time along the grid; creeping speed near stops, plus dwell time at each stop
-    dt_grid = 1.0 / np.maximum(0.5 * (v_grid[:-1] + v_grid[1:]), 0.3)
-    t_grid = np.concatenate(([0.0], np.cumsum(dt_grid)))
+    extra = np.random.default_rng([seed, 1])  # the realistic-noise options' own stream
+    grid, v_grid, stops = _speed_profile(net, route, edge_start, total, cfg, rng, extra)
+    at_node: dict[int, list[float]] = {}  # both kinds of stop at one node: one longer stop
     for at, dwell in stops:
-        t_grid[round(at) + 1 :] += dwell
-    dense_t = np.arange(0.0, t_grid[-1], 1.0 / _DENSE_HZ)
-    dense_s = np.interp(dense_t, t_grid, grid)
+        at_node.setdefault(round(at), [at, 0.0])[1] += dwell
+    stops = [(at, dwell) for at, dwell in at_node.values()]
+
+    # time along the grid; creeping speed near stops, then each stop's dwell standing still
+    dt_grid = 1.0 / np.maximum(0.5 * (v_grid[:-1] + v_grid[1:]), 0.3)
+    arrive, knot_t, knot_s = _standing_knots(
+        grid, np.concatenate(([0.0], np.cumsum(dt_grid))), stops
+    )
+    dense_t = np.arange(0.0, knot_t[-1], 1.0 / _DENSE_HZ)
+    dense_s = np.interp(dense_t, knot_t, knot_s)
     dense_v = np.interp(dense_s, grid, v_grid)
     dense_x, dense_y = np.interp(dense_s, s_vert, x), np.interp(dense_s, s_vert, y)
     ahead_x = np.interp(np.minimum(dense_s + 1.0, total), s_vert, x)
@@ -366,29 +759,66 @@ def simulate_trip(
     back_y = np.interp(np.maximum(dense_s - 1.0, 0.0), s_vert, y)
     dense_heading = np.degrees(np.arctan2(ahead_x - back_x, ahead_y - back_y)) % 360.0
 
+    def arrive_s(at: float) -> float:
+        return float(np.interp(at, grid, arrive))
+
+    def distance_at(t: float) -> float:
+        return float(np.interp(t, knot_t, knot_s))
+
     sample_t = np.arange(0.0, dense_t[-1], cfg.interval_s)
+    # stretches that begin after the last fix are left out; an outage must end before it
+    canyon_spans = _events_along(
+        extra, cfg.canyon_per_km, cfg.canyon_s, total, arrive_s, distance_at
+    )
+    canyon_sides = [1 if extra.random() < 0.5 else -1 for _ in canyon_spans]
+    seen = [c[0] < sample_t[-1] for c in canyon_spans]
+    canyon_spans = [c for c, ok in zip(canyon_spans, seen, strict=True) if ok]
+    canyon_sides = [d for d, ok in zip(canyon_sides, seen, strict=True) if ok]
+    outage_spans = _events_along(
+        extra, cfg.outage_per_km, cfg.outage_range_s, total, arrive_s, distance_at
+    )
+    outage_spans = [o for o in outage_spans if o[1] < sample_t[-1]]
     keep = np.ones(len(sample_t), dtype=bool)
+    legacy_outages: list[tuple[float, float, float]] = []
     if cfg.outage_rate > 0:
         for start in sample_t[rng.random(len(sample_t)) < cfg.outage_rate * cfg.interval_s / 60]:
             keep &= ~((sample_t > start) & (sample_t <= start + cfg.outage_s))
+            legacy_outages.append((float(start), float(start) + cfg.outage_s, distance_at(start)))
+    if outage_spans:
+        dark = np.zeros(len(sample_t), dtype=bool)
+        for start, end, _ in outage_spans:
+            dark |= (sample_t > start) & (sample_t < end)
+        dark[0] = False  # the trip's first fix is always seen
+        keep &= ~dark
     sample_t = sample_t[keep]
     s = np.interp(sample_t, dense_t, dense_s)
     true_x, true_y = np.interp(s, s_vert, x), np.interp(s, s_vert, y)
+    true_v = np.interp(sample_t, dense_t, dense_v)
+    true_heading = _interp_angle(sample_t, dense_t, dense_heading)
     noise = _position_noise(rng, sample_t, cfg)
     outlier = rng.random(len(s)) < cfg.outlier_rate
     angle = rng.uniform(0, 2 * np.pi, len(s))
     obs_x = true_x + noise[:, 0] + outlier * cfg.outlier_m * np.sin(angle)
     obs_y = true_y + noise[:, 1] + outlier * cfg.outlier_m * np.cos(angle)
+    canyons: list[TruthEvent] = []
+    for (start, end, at), side in zip(canyon_spans, canyon_sides, strict=True):
+        inside = (sample_t >= start) & (sample_t <= end)
+        right = np.radians(true_heading[inside] + 90.0 * side)  # driving direction +- 90 deg
+        obs_x[inside] += cfg.canyon_bias_m * np.sin(right)
+        obs_y[inside] += cfg.canyon_bias_m * np.cos(right)
+        first_fix, last_fix = _inside(sample_t, start, end)
+        canyons.append(
+            TruthEvent("canyon", start, end, first_fix, last_fix, at, side, cfg.canyon_bias_m)
+        )
     lon, lat = net.unproject(obs_x, obs_y)
-    heading = _interp_angle(sample_t, dense_t, dense_heading)
-    heading = (heading + rng.normal(0, cfg.heading_noise_deg, len(s))) % 360.0
-    speed = np.maximum(
-        np.interp(sample_t, dense_t, dense_v) + rng.normal(0, cfg.speed_noise_mps, len(s)), 0.0
-    )
-    scale = 1.0 + float(rng.uniform(-cfg.odometer_scale_error, cfg.odometer_scale_error))
+    heading_sigma = cfg.heading_noise_deg + cfg.heading_noise_slow_deg * np.exp(-true_v)
+    heading = (true_heading + rng.normal(0, 1, len(s)) * heading_sigma) % 360.0
+    speed = np.maximum(true_v + rng.normal(0, cfg.speed_noise_mps, len(s)), 0.0)
+    scale = 1.0 + cfg.odometer_bias
+    scale += float(rng.uniform(-cfg.odometer_scale_error, cfg.odometer_scale_error))
     odometer = s * scale
-    trace = Trace(
-        time=sample_t + 1.7e9,
+    full = Trace(
+        time=sample_t + _EPOCH_S,
         lon=lon,
         lat=lat,
         heading=heading,
@@ -397,6 +827,7 @@ def simulate_trip(
         odometer=odometer,
         trace_id=trace_id,
     )
+    trace = strip_to_class(full, cfg.input_class) if cfg.input_class != "odometer" else full
     true_lon, true_lat = net.unproject(true_x, true_y)
     edge_of = np.clip(np.searchsorted(edge_start, s, side="right") - 1, 0, len(route) - 1)
     true_edge = np.asarray(route, dtype=np.int64)[edge_of]
@@ -422,6 +853,26 @@ def simulate_trip(
                 float(hi),
             )
         )
+    turnbacks = count_turnbacks([e.to_dict() for e in truth_edges])
+    stop_events = []
+    for at, dwell in sorted(stops):
+        start = arrive_s(round(at))
+        first_fix, last_fix = _inside(sample_t, start, start + dwell)
+        stop_events.append(TruthEvent("stop", start, start + dwell, first_fix, last_fix, at))
+    outage_events = []
+    for start, end, at in sorted(legacy_outages + outage_spans):
+        before = np.flatnonzero(sample_t <= start)
+        after = np.flatnonzero(sample_t >= end)
+        outage_events.append(
+            TruthEvent(
+                "outage",
+                start,
+                end,
+                int(before[-1]) if len(before) else -1,
+                int(after[0]) if len(after) else -1,
+                at,
+            )
+        )
     inside = (s_vert > s[0]) & (s_vert < s[-1])
     gx = np.concatenate(([true_x[0]], x[inside], [true_x[-1]]))
     gy = np.concatenate(([true_y[0]], y[inside], [true_y[-1]]))
@@ -436,7 +887,7 @@ def simulate_trip(
         true_offset_m=true_offset,
         true_lon=true_lon,
         true_lat=true_lat,
-        dense_time_s=dense_t + 1.7e9,
+        dense_time_s=dense_t + _EPOCH_S,
         dense_lon=dense_lon,
         dense_lat=dense_lat,
         dense_heading_deg=dense_heading,
@@ -445,6 +896,18 @@ def simulate_trip(
         odometer_scale=scale,
         geometry_lon=geom_lon,
         geometry_lat=geom_lat,
+        stops=tuple(_shift(e) for e in stop_events),
+        outages=tuple(_shift(e) for e in outage_events),
+        canyons=tuple(_shift(e) for e in canyons),
+        uturns=turnbacks.uturns,
+        loops=turnbacks.loops,
+    )
+
+
+def _shift(event: TruthEvent) -> TruthEvent:
+    """The event with trip-relative times made epoch seconds, as the trace's."""
+    return dataclasses.replace(
+        event, start_s=event.start_s + _EPOCH_S, end_s=event.end_s + _EPOCH_S
     )
 
 
@@ -457,11 +920,12 @@ def _interp_angle(t: FloatArray, tp: FloatArray, deg: FloatArray) -> FloatArray:
 
 def _position_noise(rng: np.random.Generator, t: FloatArray, cfg: SimulationConfig) -> FloatArray:
     white = rng.normal(0.0, cfg.noise_m, (len(t), 2))
-    if cfg.noise_correlation_s <= 0 or len(t) < 2:
+    tau = cfg.correlation_time_s
+    if tau <= 0 or len(t) < 2:
         return white
     noise = np.empty_like(white)
     noise[0] = white[0]
-    rho = np.exp(-np.diff(t) / cfg.noise_correlation_s)
+    rho = np.exp(-np.diff(t) / tau)
     for i in range(1, len(t)):
         noise[i] = rho[i - 1] * noise[i - 1] + np.sqrt(1 - rho[i - 1] ** 2) * white[i]
     return noise

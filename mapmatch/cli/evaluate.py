@@ -26,8 +26,10 @@ def add_parser(sub: Any) -> None:
         help="score matches against simulated ground truth",
         description=(
             "Score matches of a `mapmatch simulate` folder: route mismatch fraction (Newson & "
-            "Krumm), share of fixes on the right edge and matched-length error, per trace and "
-            "overall. Without --matched the traces are matched here first."
+            "Krumm), share of fixes on the right edge, matched-length error, U-turns and loops "
+            "the vehicle did not drive, and whether the distance verdict is the one the true "
+            "length gives, per trace and overall. Without --matched the traces are matched "
+            "here first."
         ),
     )
     parser.add_argument("simulation", help="folder written by `mapmatch simulate`")
@@ -71,18 +73,33 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps({"traces": [s.to_dict() for s in scores], "summary": summary}, indent=2))
         return 0
     head = f"{'trace':<14} {'points':>6} {'true m':>9} {'matched m':>9} {'mismatch':>8} "
-    head += f"{'on edge':>7} {'len err':>8} {'breaks':>6}"
+    head += f"{'on edge':>7} {'len err':>8} {'breaks':>6} {'U-turns':>9} {'loops':>7} verdict"
     lines = [head]
     for s in scores:
+        verdict = s.verdict or "-"
+        if s.verdict and not s.verdict_ok:
+            verdict += f" (true length: {s.true_verdict})"
         lines.append(
             f"{s.trace_id:<14} {s.points:>6} {s.true_length_m:>9.1f} {s.matched_length_m:>9.1f} "
-            f"{s.mismatch:>8.2%} {s.point_accuracy:>7.1%} {s.length_error:>+8.2%} {s.breaks:>6}"
+            f"{s.mismatch:>8.2%} {s.point_accuracy:>7.1%} {s.length_error:>+8.2%} {s.breaks:>6} "
+            f"{f'{s.uturns}/{s.true_uturns}':>9} {f'{s.loops}/{s.true_loops}':>7} {verdict}"
         )
+    verdicts = (
+        f"verdict right on {summary['verdict_accuracy']:.0%} of {summary['verdict_trips']:.0f} "
+        "odometer trips without breaks"
+        if summary["verdict_trips"]
+        else "no odometer trip without breaks to judge the verdict on"
+    )
     lines.append(
         f"\n{len(scores)} traces: route mismatch mean {summary['mismatch_mean']:.2%}, "
-        f"median {summary['mismatch_median']:.2%}; fixes on the right edge "
-        f"{summary['point_accuracy']:.1%}; length error mean {summary['length_error_mean']:+.2%}, "
-        f"worst {summary['length_error_abs_max']:.2%}"
+        f"median {summary['mismatch_median']:.2%}, p95 {summary['mismatch_p95']:.2%}; fixes on "
+        f"the right edge {summary['point_accuracy']:.1%}; length error mean "
+        f"{summary['length_error_mean']:+.2%}, p95 |err| {summary['length_error_abs_p95']:.2%}, "
+        f"worst {summary['length_error_abs_max']:.2%}, within 1 % on "
+        f"{summary['within_1pct']:.0%} of traces, within 2 % on {summary['within_2pct']:.0%}; "
+        f"spurious U-turn or loop on {summary['spurious_share']:.0%} of traces "
+        f"({summary['spurious_uturns']:.0f} U-turns, {summary['spurious_loops']:.0f} loops); "
+        f"{verdicts}\n(U-turns and loops: matched/true)"
     )
     print("\n".join(lines))
     return 0
