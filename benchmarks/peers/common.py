@@ -1,11 +1,13 @@
 """Shared driver for the peer runners (standard library only: it runs in every peer's venv).
 
 A runner is started as ``PYTHON run_<peer>.py JOB.json``. The job file holds
-``{"extract", "traces_csv", "params", "out"}``; the runner loads the network once (timed as
-``load_s``), matches the first trace once as a warm-up (not timed), then matches every trace,
-timing only the matching calls (``match_s``), and writes
-``{"peer", "load_s", "match_s", "points", "peak_rss_mb", "settings", "results": [...]}`` where
-each result is ``{"trace_id", "geometry": [[[lon, lat], ...], ...], "error"}``.
+``{"extract", "traces_csv", "params", "out"}`` and optionally ``"repeats"`` (default 1); the
+runner loads the network once (timed as ``load_s``), matches the first trace once as a warm-up
+(not timed), then matches every trace ``repeats`` times over, timing only the matching calls;
+``match_s`` is the median over the passes of one pass's total (``match_s_runs`` lists them
+all). It writes ``{"peer", "load_s", "match_s", "match_s_runs", "points", "peak_rss_mb",
+"settings", "results": [...]}`` where each result (from the first pass) is
+``{"trace_id", "geometry": [[[lon, lat], ...], ...], "error"}``.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from __future__ import annotations
 import csv
 import json
 import resource
+import statistics
 import sys
 import time
 import traceback
@@ -92,10 +95,11 @@ def run_peer(
     load
         ``load(job) -> ctx``: load network/tiles; timed as ``load_s``.
     match
-        ``match(ctx, prepared) -> raw``: the matching call only; timed.
+        ``match(ctx, prepared) -> raw``: the matching call and the building of the output a
+        user of the matcher gets (GeoJSON, coordinates in lon/lat); timed.
     geometry
-        ``geometry(ctx, trace, raw) -> [[[lon, lat], ...], ...]``: turn the raw result into
-        polylines in driving order; not timed.
+        ``geometry(ctx, trace, raw) -> [[[lon, lat], ...], ...]``: pick the polylines in
+        driving order out of the raw result for scoring; not timed.
     settings
         ``settings(ctx) -> dict``: the effective parameters, recorded in the result.
     prepare
@@ -116,30 +120,38 @@ def run_peer(
             match(ctx, inputs[0])
         except Exception:
             traceback.print_exc()
-    match_s = 0.0
+    repeats = max(1, int(job.get("repeats", 1)))
+    runs: list[float] = []
     results: list[dict[str, Any]] = []
-    for tr, prepared in zip(traces, inputs, strict=True):
-        t1 = time.perf_counter()
-        try:
-            raw = match(ctx, prepared)
-        except Exception as exc:
-            match_s += time.perf_counter() - t1
-            results.append(
-                {"trace_id": tr.trace_id, "geometry": [], "error": f"{type(exc).__name__}: {exc}"}
-            )
-            continue
-        match_s += time.perf_counter() - t1
-        try:
-            geom = geometry(ctx, tr, raw)
-            results.append({"trace_id": tr.trace_id, "geometry": geom, "error": None})
-        except Exception as exc:
-            results.append(
-                {"trace_id": tr.trace_id, "geometry": [], "error": f"{type(exc).__name__}: {exc}"}
-            )
+    for k in range(repeats):
+        total = 0.0
+        for tr, prepared in zip(traces, inputs, strict=True):
+            t1 = time.perf_counter()
+            try:
+                raw = match(ctx, prepared)
+            except Exception as exc:
+                total += time.perf_counter() - t1
+                if k == 0:
+                    error = f"{type(exc).__name__}: {exc}"
+                    results.append({"trace_id": tr.trace_id, "geometry": [], "error": error})
+                continue
+            total += time.perf_counter() - t1
+            if k > 0:
+                continue
+            try:
+                geom = geometry(ctx, tr, raw)
+                results.append({"trace_id": tr.trace_id, "geometry": geom, "error": None})
+            except Exception as exc:
+                error = f"{type(exc).__name__}: {exc}"
+                results.append({"trace_id": tr.trace_id, "geometry": [], "error": error})
+        runs.append(total)
+    match_s = statistics.median(runs)
     out = {
         "peer": peer,
         "load_s": load_s,
         "match_s": match_s,
+        "match_s_runs": runs,
+        "repeats": repeats,
         "points": sum(len(t) for t in traces),
         "peak_rss_mb": peak_rss_mb(),
         "settings": settings(ctx) if settings else job.get("params", {}),

@@ -2,8 +2,12 @@
 
 ``roadnets.load`` is the timed load (the compiled network cache counts as a normal second load);
 traces are read with ``mapmatch.read_traces`` (not timed, like the peers' input preparation);
-``mapmatch.match`` is the timed call. The geometry is the LineStrings of the result's
-``kind == "segment"`` features, in driving order.
+the timed call is ``mapmatch.match`` followed by ``result.to_geojson()``, the output a user gets
+(as FMM's conversion of its result and Meili's JSON response are timed). The geometry is the
+LineStrings of the GeoJSON's ``kind == "segment"`` features, in driving order.
+
+Input: whatever columns the job's traces CSV has (positions only, or with heading, speed,
+accuracy and odometer); ``mapmatch.read_traces`` takes them all.
 
 Configuration: ``MatchConfig(sigma_m=noise)`` (our documented knob for the sensor noise); any
 other ``MatchConfig`` field can be given through ``params["config"]``.
@@ -11,6 +15,7 @@ other ``MatchConfig`` field can be given through ``params["config"]``.
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -43,15 +48,15 @@ def prepare(ctx: dict[str, Any], tr: TracePoints) -> Any:
 
 
 def match(ctx: dict[str, Any], trace: Any) -> Any:
-    """One ``mapmatch.match`` call."""
+    """One ``mapmatch.match`` call and the GeoJSON of its result."""
     import mapmatch
 
-    return mapmatch.match(trace, ctx["net"], ctx["config"])
+    return mapmatch.match(trace, ctx["net"], ctx["config"]).to_geojson()
 
 
 def geometry(ctx: dict[str, Any], tr: TracePoints, raw: Any) -> Geometry:
     """LineStrings of the segment features, in order."""
-    fc = raw.to_geojson()
+    fc = json.loads(raw) if isinstance(raw, str | bytes) else raw
     out: Geometry = []
     for feat in fc.get("features", []):
         props = feat.get("properties") or {}

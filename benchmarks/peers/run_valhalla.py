@@ -11,6 +11,11 @@ Tuning (Meili at its best, not its defaults): ``turn_penalty_factor=500`` (defau
 40 m outliers (25 m left a third of the 1 Hz traces broken into pieces);
 ``breakage_distance`` raised to 3000 m so sparse traces do not break; ``interpolation_distance``
 left at 10 m (its default). Any of these can be overridden with ``params["trace_options"]``.
+
+Input: time, lon, lat, and each point's ``accuracy`` when the traces CSV has that column (the
+full-input class): Meili takes a per-point GPS accuracy (``accuracy`` of a shape point, which
+replaces ``gps_accuracy`` for that point). It has no use for heading, speed or odometer
+(shape points carry no such fields for map matching).
 """
 
 from __future__ import annotations
@@ -59,10 +64,13 @@ def load(job: dict[str, Any]) -> dict[str, Any]:
 
 def request(ctx: dict[str, Any], tr: TracePoints) -> str:
     """The trace_attributes request body for one trace."""
-    shape = [
+    shape: list[dict[str, float]] = [
         {"lon": lon, "lat": lat, "time": t}
         for lon, lat, t in zip(tr.lon, tr.lat, tr.time, strict=True)
     ]
+    for point, acc in zip(shape, tr.accuracy, strict=True):
+        if acc is not None and acc > 0:
+            point["accuracy"] = acc
     return json.dumps(
         {
             "shape": shape,
