@@ -7,6 +7,12 @@
 #   .peers/valhalla   Python 3.12 venv with pyvalhalla (its 3.9.x wheels are CPython 3.12 only)
 #   .peers/py311      Python 3.11 venv with leuvenmapmatching, mappymatch, osmnx, osmium, rtree
 #   .peers/tiles/<stem>/valhalla.json + tiles.tar   Valhalla tiles per extract, built offline
+#   .bench/fmm        FMM (C++) and its Python binding, built from the source in
+#                     ../shared/peers/fmm/ by its build.sh (apt-installs cmake, g++, Boost, GDAL,
+#                     SWIG; 10-20 minutes on 2 cores the first time; skipped with a notice when
+#                     ../shared/peers/fmm is absent, e.g. on a user's clone). SKIP_FMM=1 skips it.
+#                     The edge files and UBODTs are made per extract by compare_peers.py and
+#                     cached under .bench/fmm/cache/.
 #
 # EXTRACT defaults to every file in ../shared/data/osm/ (PBF directly; .osm/.bz2/.gz are
 # converted to PBF with pyosmium first, since valhalla_build_tiles reads PBF only).
@@ -76,4 +82,29 @@ PYEOF
     log "tiles for $stem FAILED, see $dir/build.log"
   fi
 done
+# FMM: built from the shared source into .bench/fmm for the project venv's interpreter (its runner
+# reads our compiled network, so it runs in that venv with the binding on PYTHONPATH).
+FMM_SRC="${FMM_SRC:-$ROOT/../shared/peers/fmm}"
+PROJECT_PY="${PROJECT_PY:-$ROOT/.venv/bin/python}"
+if [[ "${SKIP_FMM:-0}" == 1 ]]; then
+  log "FMM skipped (SKIP_FMM=1)"
+elif [[ ! -f "$FMM_SRC/build.sh" ]]; then
+  log "FMM skipped: no $FMM_SRC/build.sh (the FMM source and build script live in ../shared/peers/fmm)"
+elif [[ ! -x "$PROJECT_PY" ]]; then
+  log "FMM skipped: no project venv at $PROJECT_PY (make the venv first, or set PROJECT_PY)"
+elif [[ -f "$ROOT/.bench/fmm/src/build/ubodt_gen" && -f "$ROOT/.bench/fmm/src/build/python/_fmm.so" ]] \
+     && PYTHONPATH="$ROOT/.bench/fmm/src/build/python" "$PROJECT_PY" -c "import fmm" 2>/dev/null; then
+  log "FMM up to date in .bench/fmm"
+else
+  log "building FMM into .bench/fmm (10-20 minutes on 2 cores the first time; log .bench/fmm-build.log)"
+  mkdir -p "$ROOT/.bench"
+  # an absolute interpreter path: build.sh resolves it from inside its build folder
+  if bash "$FMM_SRC/build.sh" "$ROOT/.bench/fmm" "$PROJECT_PY" > "$ROOT/.bench/fmm-build.log" 2>&1; then
+    log "FMM ready: $(tail -1 "$ROOT/.bench/fmm-build.log")"
+  else
+    log "FMM build FAILED, see .bench/fmm-build.log"; tail -20 "$ROOT/.bench/fmm-build.log"
+    # build.sh configures only once; a configure that failed must run again next time
+    [[ -f "$ROOT/.bench/fmm/src/build/Makefile" ]] || rm -f "$ROOT/.bench/fmm/src/build/CMakeCache.txt"
+  fi
+fi
 log "done; run: .venv/bin/python benchmarks/compare_peers.py"
