@@ -2,22 +2,31 @@
 
 For each extract and each (sampling interval, noise) set it simulates traces with ground truth
 (``python -m mapmatch simulate`` when it exists, else ``benchmarks/peers/interim_traces.py``),
-runs every peer in its own subprocess and venv (``benchmarks/peers/run_<peer>.py``; load timed
-apart, one warm-up trace, then only the matching calls timed, one process, one thread), scores
-every peer's matched geometry the same way (``benchmarks/scoring.py``) and prints one markdown
-table. Peers: ours, Valhalla Meili (pyvalhalla), leuvenmapmatching, mappymatch (LCSS); set them
-up once with ``bash benchmarks/peers/setup.sh``.
+writes them twice, as **positions only** (``trace_id,time,lon,lat``) and as **full input**
+(plus heading, speed, accuracy, odometer), and runs every peer on each in its own subprocess and
+venv (``benchmarks/peers/run_<peer>.py``; one process, one thread; load timed apart; one
+warm-up trace; then every trace matched ``--repeats`` times and the median pass timed; the
+timed part includes building the output a user gets: our GeoJSON, FMM's path in lon/lat).
+A peer that can only use positions runs once per set and its row stands in both classes.
+Every matched geometry is scored the same way (``benchmarks/scoring.py``: route mismatch, and
+the matched length against the true one), and one markdown table plus JSON are written.
+
+Peers: ours, FMM (stock, and with the points that have no road within its radius dropped),
+Valhalla Meili, leuvenmapmatching, mappymatch. Set them up once with
+``bash benchmarks/peers/setup.sh`` (FMM also needs ``../shared/peers/fmm``).
 
 Usage::
 
-    .venv/bin/python benchmarks/compare_peers.py                       # defaults, ~10-15 min
+    .venv/bin/python benchmarks/compare_peers.py                # full run (4 extracts)
+    .venv/bin/python benchmarks/compare_peers.py --quick        # a few minutes
     .venv/bin/python benchmarks/compare_peers.py --extract monaco_2020.osm.pbf --sets 1:5 \
-        --traces 5 --peers ours,valhalla
+        --traces 5 --peers ours,fmm-drop,valhalla
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import datetime as dt
 import json
 import math
@@ -27,43 +36,102 @@ import statistics
 import subprocess
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent / "peers"))
+import fmm_network
 import scoring
 
 ROOT = Path(__file__).resolve().parents[1]
 PEERS_DIR = ROOT / "benchmarks" / "peers"
 OSM_DIR = ROOT.parent / "shared" / "data" / "osm"
-DEFAULT_EXTRACTS = ("monaco_2020.osm.pbf", "andorra_2020.osm.pbf")
+FMM_PYTHON_DIR = fmm_network.DEFAULT_BUILD / "src" / "build" / "python"
+DEFAULT_EXTRACTS = (
+    "andorra_2020.osm.pbf",
+    "monaco_2020.osm.pbf",
+    "liechtenstein_2015.osm.pbf",
+    "krems_at_2013.osm.gz",
+)
 DEFAULT_SETS = "1:5,15:10,30:20"
+INPUTS = ("positions", "full")
+POSITION_COLUMNS = ("trace_id", "time", "lon", "lat")
+QUICK = {
+    "extract": ["monaco_2020.osm.pbf", "andorra_2020.osm.pbf"],
+    "sets": "1:5,15:10",
+    "traces": 5,
+    "repeats": 1,
+    "peers": "ours,fmm-drop,valhalla",
+}
+# the peers the summary table compares us with, in its column order
+KEY_PEERS = ("fmm", "fmm-drop", "valhalla")
 
 
 @dataclass(frozen=True, slots=True)
 class Peer:
-    """A matcher under test: the python that runs it and its runner script."""
+    """A matcher under test: the python that runs it, its runner and how it is fed."""
 
     name: str
+    label: str
     python: Path
     script: Path
+    full_input: bool
+    params: dict[str, Any] = field(default_factory=dict)
+    env: dict[str, str] = field(default_factory=dict)
+    max_repeats: int | None = None
+    needs_fmm: bool = False
 
 
+_FMM_ENV = {"PYTHONPATH": str(FMM_PYTHON_DIR)}
 PEERS: dict[str, Peer] = {
-    "ours": Peer("ours", Path(sys.executable), PEERS_DIR / "run_ours.py"),
+    "ours": Peer("ours", "ours", Path(sys.executable), PEERS_DIR / "run_ours.py", True),
+    "fmm": Peer(
+        "fmm",
+        "FMM",
+        Path(sys.executable),
+        PEERS_DIR / "run_fmm.py",
+        False,
+        {"fmm": {"variant": "stock"}},
+        _FMM_ENV,
+        needs_fmm=True,
+    ),
+    "fmm-drop": Peer(
+        "fmm-drop",
+        "FMM drop",
+        Path(sys.executable),
+        PEERS_DIR / "run_fmm.py",
+        False,
+        {"fmm": {"variant": "drop"}},
+        _FMM_ENV,
+        needs_fmm=True,
+    ),
     "valhalla": Peer(
-        "valhalla", ROOT / ".peers/valhalla/bin/python", PEERS_DIR / "run_valhalla.py"
+        "valhalla",
+        "Meili",
+        ROOT / ".peers/valhalla/bin/python",
+        PEERS_DIR / "run_valhalla.py",
+        True,
     ),
     "leuvenmapmatching": Peer(
-        "leuvenmapmatching", ROOT / ".peers/py311/bin/python", PEERS_DIR / "run_leuven.py"
+        "leuvenmapmatching",
+        "leuven",
+        ROOT / ".peers/py311/bin/python",
+        PEERS_DIR / "run_leuven.py",
+        False,
+        max_repeats=1,  # pure Python, 100x slower: one timed pass
     ),
     "mappymatch": Peer(
-        "mappymatch", ROOT / ".peers/py311/bin/python", PEERS_DIR / "run_mappymatch.py"
+        "mappymatch",
+        "mappymatch",
+        ROOT / ".peers/py311/bin/python",
+        PEERS_DIR / "run_mappymatch.py",
+        False,
     ),
 }
 
-# one process, one thread: no BLAS/numba thread pools in any peer
+# one process, one thread: no BLAS/numba/OpenMP thread pools in any peer
 SINGLE_THREAD_ENV = {
     "OMP_NUM_THREADS": "1",
     "OPENBLAS_NUM_THREADS": "1",
@@ -87,24 +155,30 @@ class TraceSet:
 
 @dataclass(frozen=True, slots=True)
 class Row:
-    """One line of the table."""
+    """One peer on one set and input class."""
 
     extract: str
     peer: str
     interval_s: float
     noise_m: float
+    input: str
     traces: int
-    points: int
-    failed: int
-    load_s: float
-    match_s: float
-    points_per_s: float
-    ours_ratio: float
-    mismatch_mean: float
-    mismatch_median: float
-    precision: float
-    recall: float
-    peak_rss_mb: float
+    points: int = 0
+    failed: int = 0
+    load_s: float = math.nan
+    match_s: float = math.nan
+    repeats: int = 0
+    points_per_s: float = math.nan
+    ours_ratio: float = math.nan
+    mismatch_mean: float = math.nan
+    mismatch_median: float = math.nan
+    precision: float = math.nan
+    recall: float = math.nan
+    length_err_mean: float = math.nan
+    length_abs_err_mean: float = math.nan
+    within_1pct: float = math.nan
+    peak_rss_mb: float = math.nan
+    positions_only: bool = False
     error: str | None = None
 
 
@@ -176,6 +250,34 @@ def simulate(
     subprocess.run(cmd, check=True, env=os.environ | SINGLE_THREAD_ENV)
 
 
+def write_positions_only(full_csv: Path, out_csv: Path) -> tuple[int, list[str]]:
+    """
+    Copy a traces CSV keeping only ``trace_id,time,lon,lat``.
+
+    Returns the number of rows and the full file's columns.
+
+    Raises
+    ------
+    SystemExit
+        The file lacks one of the position columns (names the file and the column).
+    """
+    with full_csv.open(newline="") as src:
+        reader = csv.DictReader(src)
+        columns = list(reader.fieldnames or [])
+        missing = [c for c in POSITION_COLUMNS if c not in columns]
+        if missing:
+            msg = f"{full_csv}: no column {missing[0]!r} (columns: {columns})"
+            raise SystemExit(msg)
+        rows = 0
+        with out_csv.open("w", newline="") as dst:
+            writer = csv.writer(dst)
+            writer.writerow(POSITION_COLUMNS)
+            for row in reader:
+                writer.writerow([row[c] for c in POSITION_COLUMNS])
+                rows += 1
+    return rows, columns
+
+
 def read_truth(path: Path) -> dict[str, list[list[float]]]:
     """Truth geometries by trace id."""
     out = {}
@@ -191,11 +293,25 @@ def peer_available(peer: Peer) -> tuple[bool, str]:
     """Whether a peer can run here, and why not."""
     if not peer.python.exists():
         return False, f"{peer.python} missing; run: bash benchmarks/peers/setup.sh"
+    probe = None
     if peer.name == "ours":
         probe = "import mapmatch, roadnets; mapmatch.match; mapmatch.read_traces; roadnets.load"
-        r = subprocess.run([str(peer.python), "-c", probe], capture_output=True, check=False)
+    elif peer.needs_fmm:
+        ubodt_gen = fmm_network.DEFAULT_BUILD / "src" / "build" / "ubodt_gen"
+        if not ubodt_gen.exists():
+            return False, f"{ubodt_gen} missing; run: bash benchmarks/peers/setup.sh"
+        probe = "import fmm; fmm.FastMapMatch; fmm.UBODT"
+    if probe:
+        r = subprocess.run(
+            [str(peer.python), "-c", probe],
+            capture_output=True,
+            text=True,
+            check=False,
+            env=os.environ | peer.env,
+        )
         if r.returncode != 0:
-            return False, "mapmatch.match / roadnets.load not importable yet"
+            last = (r.stderr.strip().splitlines() or ["?"])[-1]
+            return False, f"not importable ({last}); run: bash benchmarks/peers/setup.sh"
     return True, ""
 
 
@@ -204,20 +320,23 @@ def run_job(
     extract: Path,
     traces_csv: Path,
     params: dict[str, Any],
+    repeats: int,
     work: Path,
     timeout_s: float,
 ) -> tuple[dict[str, Any] | None, str | None, float]:
     """Run one peer on one trace file; return (result, error, wall seconds of the process)."""
     work.mkdir(parents=True, exist_ok=True)
-    job = {
+    out_path = work / f"{peer.name}.result.json"
+    job: dict[str, Any] = {
         "extract": str(extract),
         "traces_csv": str(traces_csv),
         "params": params,
-        "out": str(work / f"{peer.name}.result.json"),
+        "repeats": repeats,
+        "out": str(out_path),
     }
     job_path = work / f"{peer.name}.job.json"
     job_path.write_text(json.dumps(job, indent=1))
-    env = os.environ | SINGLE_THREAD_ENV
+    env = os.environ | SINGLE_THREAD_ENV | peer.env
     if peer.name == "valhalla":  # its console scripts look themselves up on PATH
         env["PATH"] = f"{peer.python.parent}{os.pathsep}{env.get('PATH', '')}"
     t0 = time.perf_counter()
@@ -236,19 +355,47 @@ def run_job(
     except subprocess.TimeoutExpired:
         return None, f"timeout after {timeout_s:.0f} s", time.perf_counter() - t0
     wall = time.perf_counter() - t0
-    if r.returncode != 0 or not Path(job["out"]).exists():
+    if r.returncode != 0 or not out_path.exists():
         tail = log.read_text(errors="replace").strip().splitlines()[-3:]
         return None, f"exit {r.returncode}: {' | '.join(tail)}", wall
-    return json.loads(Path(job["out"]).read_text()), None, wall
+    return json.loads(out_path.read_text()), None, wall
 
 
-def score_result(
-    truth: dict[str, list[list[float]]], result: dict[str, Any]
-) -> tuple[scoring.ScoreSummary, int, list[dict[str, Any]]]:
-    """Score every trace of a peer's result (missing or failed traces count as unmatched)."""
+@dataclass(frozen=True, slots=True)
+class Accuracy:
+    """Scores of one peer's result on one set."""
+
+    summary: scoring.ScoreSummary
+    failed: int
+    length_err: list[float]
+    per_trace: list[dict[str, Any]]
+
+    @property
+    def length_err_mean(self) -> float:
+        return statistics.fmean(self.length_err) if self.length_err else math.nan
+
+    @property
+    def length_abs_err_mean(self) -> float:
+        return statistics.fmean(abs(e) for e in self.length_err) if self.length_err else math.nan
+
+    @property
+    def within_1pct(self) -> float:
+        if not self.length_err:
+            return math.nan
+        return sum(abs(e) <= 0.01 for e in self.length_err) / len(self.length_err)
+
+
+def score_result(truth: dict[str, list[list[float]]], result: dict[str, Any]) -> Accuracy:
+    """
+    Score every trace of a peer's result (missing or failed traces count as unmatched).
+
+    Length error per trace is ``matched length / true length - 1`` from the same geometry the
+    mismatch is measured on; a failed trace has matched nothing (-100 %).
+    """
     by_id = {str(r["trace_id"]): r for r in result.get("results", [])}
     scores = []
     per_trace = []
+    length_err = []
     failed = 0
     for trace_id, geom in truth.items():
         r = by_id.get(trace_id)
@@ -257,6 +404,9 @@ def score_result(
             failed += 1
         s = scoring.score_route(geom, matched)
         scores.append(s)
+        err = s.matched_length_m / s.true_length_m - 1.0 if s.true_length_m > 0 else math.nan
+        if not math.isnan(err):
+            length_err.append(err)
         per_trace.append(
             {
                 "trace_id": trace_id,
@@ -265,47 +415,113 @@ def score_result(
                 "added_m": s.added_m,
                 "missed_m": s.missed_m,
                 "mismatch": s.mismatch,
-                "error": None if r is None else r.get("error"),
+                "length_err": err,
+                "error": "missing" if r is None else r.get("error"),
             }
         )
-    return scoring.summarize(scores), failed, per_trace
+    return Accuracy(scoring.summarize(scores), failed, length_err, per_trace)
 
 
-def _fmt(x: float, nd: int = 2) -> str:
+def _fmt(x: float | None, nd: int = 2) -> str:
     if x is None or (isinstance(x, float) and math.isnan(x)):
         return "-"
     return f"{x:,.{nd}f}"
 
 
-def markdown(rows: list[Row], header: dict[str, Any]) -> str:
-    """The results table with a header naming date, cores and tools."""
+def _pct(x: float | None, nd: int = 1, *, sign: bool = False) -> str:
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "-"
+    return f"{100 * x:+.{nd}f}" if sign else f"{100 * x:.{nd}f}"
+
+
+def _set_label(r: Row) -> str:
+    return f"{r.interval_s:g} s / {r.noise_m:g} m"
+
+
+def summary_markdown(rows: list[Row], key_peers: list[str]) -> str:
+    """One line per extract, set and input class: our speed, ratios and everyone's accuracy."""
+    labels = [PEERS[p].label for p in key_peers]
+    who = " / ".join(["ours", *labels])
+    head = (
+        "| extract | set | input | ours points/s | "
+        + " | ".join(f"ours ÷ {lab}" for lab in labels)
+        + f" | mismatch mean % ({who}) | length error mean % ({who}) "
+        f"| length within 1 % ({who}) |"
+    )
+    lines = [head, "|---|---|---|--:|" + "--:|" * len(labels) + "---|---|---|"]
+    groups: dict[tuple[str, float, float, str], dict[str, Row]] = {}
+    for r in rows:
+        groups.setdefault((r.extract, r.interval_s, r.noise_m, r.input), {})[r.peer] = r
+    for (extract, _, _, inp), by_peer in groups.items():
+        ours = by_peer.get("ours")
+        if ours is None:
+            continue
+        order = [ours] + [by_peer.get(p) for p in key_peers]
+        ratios = []
+        for p in key_peers:
+            peer_row = by_peer.get(p)
+            bad = peer_row is None or bool(peer_row.error)
+            ratios.append("-" if bad or peer_row is None else _fmt(peer_row.ours_ratio, 2))
+        mism = " / ".join("-" if r is None or r.error else _pct(r.mismatch_mean) for r in order)
+        lerr = " / ".join(
+            "-" if r is None or r.error else _pct(r.length_err_mean, sign=True) for r in order
+        )
+        within = " / ".join("-" if r is None or r.error else _pct(r.within_1pct, 0) for r in order)
+        pps = "-" if ours.error else _fmt(ours.points_per_s, 0)
+        lines.append(
+            f"| {extract} | {_set_label(ours)} | {inp} | {pps} | {' | '.join(ratios)} "
+            f"| {mism} | {lerr} | {within} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def detail_markdown(rows: list[Row]) -> str:
+    """Every row: speed, failures, route mismatch, length error, memory."""
     lines = [
-        f"Peer comparison, {header['date']}, {header['nproc']} cores ({header['cpu']}), "
-        f"one process and one thread per matcher; trace source: {header['trace_source']}; "
-        f"outlier rate {header['outlier_rate']:g} (40 m); scoring tolerance "
-        f"{scoring.DEFAULT_TOLERANCE_M:g} m, direction within "
-        f"{scoring.DEFAULT_MAX_ANGLE_DEG:g} deg.",
-        "",
-        "| extract | peer | interval s | noise m | traces | points | failed | load s | match s "
+        "| extract | set | input | peer | traces | points | failed | load s | match s "
         "| points/s | ours ÷ peer | mismatch mean | mismatch median | precision | recall "
-        "| peak RSS MB |",
-        "|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|",
+        "| length err mean | abs length err mean | length within 1 % | peak RSS MB |",
+        "|---|---|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|",
     ]
     for r in rows:
+        peer = PEERS[r.peer].label if r.peer in PEERS else r.peer
+        if r.positions_only and r.input == "full":
+            peer += " (positions)"
         if r.error:
             lines.append(
-                f"| {r.extract} | {r.peer} | {r.interval_s:g} | {r.noise_m:g} | {r.traces} "
-                f"| - | - | - | - | - | - | - | - | - | - | - |  (failed: {r.error[:120]})"
+                f"| {r.extract} | {_set_label(r)} | {r.input} | {peer} | {r.traces} "
+                f"| - | - | - | - | - | - | - | - | - | - | - | - | - | - | "
+                f"(failed: {r.error[:120]})"
             )
             continue
         lines.append(
-            f"| {r.extract} | {r.peer} | {r.interval_s:g} | {r.noise_m:g} | {r.traces} "
-            f"| {r.points:,} | {r.failed} | {_fmt(r.load_s)} | {_fmt(r.match_s)} "
-            f"| {_fmt(r.points_per_s, 0)} | {_fmt(r.ours_ratio, 1)} "
-            f"| {_fmt(100 * r.mismatch_mean, 1)} % | {_fmt(100 * r.mismatch_median, 1)} % "
-            f"| {_fmt(r.precision, 3)} | {_fmt(r.recall, 3)} | {_fmt(r.peak_rss_mb, 0)} |"
+            f"| {r.extract} | {_set_label(r)} | {r.input} | {peer} | {r.traces} | {r.points:,} "
+            f"| {r.failed} | {_fmt(r.load_s)} | {_fmt(r.match_s, 3)} "
+            f"| {_fmt(r.points_per_s, 0)} | {_fmt(r.ours_ratio, 2)} "
+            f"| {_pct(r.mismatch_mean)} % | {_pct(r.mismatch_median)} % "
+            f"| {_fmt(r.precision, 3)} | {_fmt(r.recall, 3)} "
+            f"| {_pct(r.length_err_mean, 2, sign=True)} % | {_pct(r.length_abs_err_mean, 2)} % "
+            f"| {_pct(r.within_1pct, 0)} % | {_fmt(r.peak_rss_mb, 0)} |"
         )
     return "\n".join(lines) + "\n"
+
+
+def markdown(rows: list[Row], header: dict[str, Any]) -> str:
+    """Both tables with a header naming date, cores, repeats and tools."""
+    key = [p for p in KEY_PEERS if any(r.peer == p for r in rows)]
+    intro = (
+        f"Peer comparison, {header['date']}, {header['nproc']} cores ({header['cpu']}), "
+        f"one process and one thread per matcher, median of {header['repeats']} timed passes "
+        f"after a warm-up trace (ours: `match` + `to_geojson()`; FMM: `match_wkt` + its path "
+        f"in lon/lat); {header['traces_per_set']} traces per set from "
+        f"{header['trace_source']}, outlier rate {header['outlier_rate']:g} (40 m); "
+        f"scoring tolerance {scoring.DEFAULT_TOLERANCE_M:g} m, direction within "
+        f"{scoring.DEFAULT_MAX_ANGLE_DEG:g} deg. Input `positions`: time, lon, lat; `full`: "
+        "plus heading, speed, accuracy, odometer (FMM, leuven and mappymatch use positions "
+        "only, so their one run stands in both; Meili uses the per-point accuracy). "
+        f"Run wall time {header['wall_s'] / 60:.1f} min."
+    )
+    return intro + "\n\n" + summary_markdown(rows, key) + "\nAll rows:\n\n" + detail_markdown(rows)
 
 
 def _cpu_name() -> str:
@@ -318,8 +534,23 @@ def _cpu_name() -> str:
     return platform.processor() or "unknown CPU"
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run the comparison and print the table."""
+def _nan_to_none(x: Any) -> Any:
+    return None if isinstance(x, float) and math.isnan(x) else str(x)
+
+
+def _json_clean(obj: Any) -> Any:
+    """NaN/inf as null, so the JSON is strict."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _json_clean(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_json_clean(v) for v in obj]
+    return obj
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    """The command line; ``--quick`` fills what was not given with a small subset."""
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument(
         "--extract",
@@ -327,16 +558,39 @@ def main(argv: list[str] | None = None) -> int:
         help="OSM extract path or file name in ../shared/data/osm (repeatable; "
         f"default: {', '.join(DEFAULT_EXTRACTS)})",
     )
+    p.add_argument("--sets", default=None, help=f"INTERVAL_S:NOISE_M,... (default {DEFAULT_SETS})")
+    p.add_argument("--traces", type=int, default=None, help="traces per set (default 20)")
+    p.add_argument("--repeats", type=int, default=None, help="timed passes, median (default 3)")
     p.add_argument(
-        "--sets", default=DEFAULT_SETS, help="INTERVAL_S:NOISE_M,... (default %(default)s)"
+        "--inputs",
+        default=",".join(INPUTS),
+        help="input classes to run: positions, full or both (default %(default)s)",
     )
-    p.add_argument("--traces", type=int, default=20, help="traces per set (default %(default)s)")
     p.add_argument("--outlier-rate", type=float, default=0.02, help="share of 40 m outliers")
     p.add_argument("--seed", type=int, default=7)
     p.add_argument(
         "--peers",
-        default="all",
+        default=None,
         help=f"comma-separated subset of {','.join(PEERS)} (default: all available)",
+    )
+    p.add_argument(
+        "--fmm-delta",
+        type=float,
+        default=fmm_network.DEFAULT_DELTA_M,
+        help="UBODT upper bound, metres (default %(default)g)",
+    )
+    p.add_argument(
+        "--fmm-layout",
+        choices=fmm_network.LAYOUTS,
+        default="segments",
+        help="FMM edges: one per geometry segment (default) or one per edge of ours",
+    )
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="small subset for development: "
+        + ", ".join(f"{k}={v}" for k, v in QUICK.items())
+        + " (explicit options win)",
     )
     p.add_argument(
         "--out", type=Path, default=None, help="output folder (default .bench/peers/DATE)"
@@ -348,9 +602,32 @@ def main(argv: list[str] | None = None) -> int:
         help="use the interim simulator even when `mapmatch simulate` exists",
     )
     a = p.parse_args(argv)
+    defaults = {
+        "extract": list(DEFAULT_EXTRACTS),
+        "sets": DEFAULT_SETS,
+        "traces": 20,
+        "repeats": 3,
+        "peers": "all",
+    }
+    for k, v in (QUICK if a.quick else defaults).items():
+        if getattr(a, k) is None:
+            setattr(a, k, v)
+    for k, v in defaults.items():
+        if getattr(a, k) is None:
+            setattr(a, k, v)
+    return a
 
-    extracts = [resolve_extract(e) for e in (a.extract or DEFAULT_EXTRACTS)]
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the comparison, print and write the tables."""
+    t_start = time.perf_counter()
+    a = parse_args(argv)
+    extracts = [resolve_extract(e) for e in a.extract]
     sets = parse_sets(a.sets, a.outlier_rate)
+    inputs = [s.strip() for s in a.inputs.split(",") if s.strip()]
+    if not inputs or any(s not in INPUTS for s in inputs):
+        msg = f"--inputs {a.inputs!r}: choose from {','.join(INPUTS)}"
+        raise SystemExit(msg)
     names = list(PEERS) if a.peers == "all" else [n.strip() for n in a.peers.split(",")]
     unknown = [n for n in names if n not in PEERS]
     if unknown:
@@ -379,8 +656,26 @@ def main(argv: list[str] | None = None) -> int:
 
     rows: list[Row] = []
     details: list[dict[str, Any]] = []
+    fmm_files: dict[str, Any] = {}
     for extract in extracts:
         stem = extract.name.split(".")[0]
+        fmm_spec: dict[str, Any] | None = None
+        fmm_error: str | None = None
+        if any(p.needs_fmm for p in peers):
+            print(f"[compare_peers] {stem}: FMM edge file and UBODT ...", end=" ", flush=True)
+            try:
+                files = fmm_network.prepare(extract, layout=a.fmm_layout, delta_m=a.fmm_delta)
+            except (RuntimeError, FileNotFoundError, OSError) as exc:
+                fmm_error = f"FMM preparation failed: {exc}"
+                print(fmm_error, flush=True)
+            else:
+                fmm_files[stem] = asdict(files)
+                fmm_spec = {"edges_shp": files.edges_shp, "ubodt": files.ubodt, "crs": files.crs}
+                print(
+                    f"{files.edge_file['edges']:,} edges, UBODT {files.ubodt_mb:,.0f} MB "
+                    f"({'cached' if files.from_cache else f'built in {files.ubodt_s:.0f} s'})",
+                    flush=True,
+                )
         for k, ts in enumerate(sets):
             set_dir = out / stem / ts.label
             try:
@@ -392,87 +687,114 @@ def main(argv: list[str] | None = None) -> int:
                 skipped[f"{stem} {ts.label}"] = "simulation failed"
                 continue
             truth = read_truth(set_dir / "truth.jsonl")
-            params = {
+            csvs = {"full": set_dir / "traces.csv", "positions": set_dir / "positions.csv"}
+            _, columns = write_positions_only(csvs["full"], csvs["positions"])
+            base = {
                 "interval_s": ts.interval_s,
                 "noise_m": ts.noise_m,
                 "outlier_rate": ts.outlier_rate,
             }
             set_rows: list[Row] = []
-            for peer in peers:
-                print(f"[compare_peers] {stem} {ts.label} {peer.name} ...", end=" ", flush=True)
-                res, err, wall = run_job(
-                    peer, extract, set_dir / "traces.csv", params, set_dir / "runs", a.timeout
-                )
-                if res is None:
-                    print(f"FAILED ({err})", flush=True)
-                    set_rows.append(
-                        Row(
-                            stem,
-                            peer.name,
-                            ts.interval_s,
-                            ts.noise_m,
-                            len(truth),
-                            0,
-                            len(truth),
-                            math.nan,
-                            math.nan,
-                            math.nan,
-                            math.nan,
-                            math.nan,
-                            math.nan,
-                            math.nan,
-                            math.nan,
-                            math.nan,
-                            err,
+            first_run: dict[str, Row] = {}
+            for inp in inputs:
+                for peer in peers:
+                    if inp == "full" and not peer.full_input and peer.name in first_run:
+                        set_rows.append(replace(first_run[peer.name], input=inp))
+                        continue
+                    feed = "positions" if not peer.full_input else inp
+                    row0 = Row(stem, peer.name, ts.interval_s, ts.noise_m, inp, len(truth))
+                    row0 = replace(row0, positions_only=feed != inp or not peer.full_input)
+                    if peer.needs_fmm and fmm_spec is None:
+                        row = replace(row0, error=fmm_error or "FMM not prepared")
+                        set_rows.append(row)
+                        first_run[peer.name] = row
+                        continue
+                    params: dict[str, Any] = dict(base)
+                    for key, value in peer.params.items():
+                        params[key] = dict(value)
+                    if peer.needs_fmm and fmm_spec is not None:
+                        params["fmm"] = params.get("fmm", {}) | fmm_spec
+                    repeats = min(a.repeats, peer.max_repeats or a.repeats)
+                    print(
+                        f"[compare_peers] {stem} {ts.label} {inp} {peer.name} ...",
+                        end=" ",
+                        flush=True,
+                    )
+                    res, err, wall = run_job(
+                        peer,
+                        extract,
+                        csvs[feed],
+                        params,
+                        repeats,
+                        set_dir / "runs" / feed,
+                        a.timeout,
+                    )
+                    if res is None:
+                        print(f"FAILED ({err})", flush=True)
+                        row = replace(row0, error=err)
+                        details.append(
+                            {
+                                "extract": stem,
+                                "set": ts.label,
+                                "input": feed,
+                                "peer": peer.name,
+                                "error": err,
+                            }
                         )
-                    )
-                    details.append(
-                        {"extract": stem, "set": ts.label, "peer": peer.name, "error": err}
-                    )
-                    continue
-                summary, failed, per_trace = score_result(truth, res)
-                pps = res["points"] / res["match_s"] if res["match_s"] > 0 else math.nan
-                print(
-                    f"{res['points']} points in {res['match_s']:.2f} s ({pps:,.0f}/s), "
-                    f"mismatch {100 * summary.mismatch_mean:.1f} % (process {wall:.0f} s)",
-                    flush=True,
+                    else:
+                        acc = score_result(truth, res)
+                        pps = res["points"] / res["match_s"] if res["match_s"] > 0 else math.nan
+                        print(
+                            f"{res['points']} points in {res['match_s']:.3f} s ({pps:,.0f}/s), "
+                            f"mismatch {100 * acc.summary.mismatch_mean:.1f} %, length "
+                            f"{100 * acc.length_err_mean:+.2f} %, failed {acc.failed} "
+                            f"(process {wall:.0f} s)",
+                            flush=True,
+                        )
+                        row = replace(
+                            row0,
+                            traces=acc.summary.traces,
+                            points=int(res["points"]),
+                            failed=acc.failed,
+                            load_s=float(res["load_s"]),
+                            match_s=float(res["match_s"]),
+                            repeats=int(res.get("repeats", 1)),
+                            points_per_s=pps,
+                            mismatch_mean=acc.summary.mismatch_mean,
+                            mismatch_median=acc.summary.mismatch_median,
+                            precision=acc.summary.precision,
+                            recall=acc.summary.recall,
+                            length_err_mean=acc.length_err_mean,
+                            length_abs_err_mean=acc.length_abs_err_mean,
+                            within_1pct=acc.within_1pct,
+                            peak_rss_mb=float(res["peak_rss_mb"]),
+                        )
+                        details.append(
+                            {
+                                "extract": stem,
+                                "set": ts.label,
+                                "input": feed,
+                                "peer": peer.name,
+                                "columns": POSITION_COLUMNS if feed == "positions" else columns,
+                                "settings": res.get("settings"),
+                                "match_s_runs": res.get("match_s_runs"),
+                                "process_wall_s": wall,
+                                "per_trace": acc.per_trace,
+                            }
+                        )
+                    set_rows.append(row)
+                    first_run[peer.name] = row
+            for inp in inputs:
+                ours = next(
+                    (r for r in set_rows if r.peer == "ours" and r.input == inp and not r.error),
+                    None,
                 )
-                set_rows.append(
-                    Row(
-                        extract=stem,
-                        peer=peer.name,
-                        interval_s=ts.interval_s,
-                        noise_m=ts.noise_m,
-                        traces=summary.traces,
-                        points=int(res["points"]),
-                        failed=failed,
-                        load_s=float(res["load_s"]),
-                        match_s=float(res["match_s"]),
-                        points_per_s=pps,
-                        ours_ratio=math.nan,
-                        mismatch_mean=summary.mismatch_mean,
-                        mismatch_median=summary.mismatch_median,
-                        precision=summary.precision,
-                        recall=summary.recall,
-                        peak_rss_mb=float(res["peak_rss_mb"]),
-                    )
-                )
-                details.append(
-                    {
-                        "extract": stem,
-                        "set": ts.label,
-                        "peer": peer.name,
-                        "settings": res.get("settings"),
-                        "process_wall_s": wall,
-                        "per_trace": per_trace,
-                    }
-                )
-            ours = next((r for r in set_rows if r.peer == "ours" and not r.error), None)
-            for r in set_rows:
-                ratio = (
-                    ours.points_per_s / r.points_per_s if ours and r.points_per_s > 0 else math.nan
-                )
-                rows.append(Row(**(asdict(r) | {"ours_ratio": ratio})))
+                for r in set_rows:
+                    if r.input != inp:
+                        continue
+                    ok = ours is not None and not r.error and r.points_per_s > 0
+                    ratio = ours.points_per_s / r.points_per_s if ok and ours else math.nan
+                    rows.append(replace(r, ours_ratio=ratio))
 
     header = {
         "date": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
@@ -484,15 +806,20 @@ def main(argv: list[str] | None = None) -> int:
         "skipped": skipped,
         "extracts": [str(e) for e in extracts],
         "sets": a.sets,
+        "inputs": inputs,
         "traces_per_set": a.traces,
+        "repeats": a.repeats,
+        "fmm": fmm_files,
+        "command": " ".join([Path(sys.executable).name, *sys.argv]),
+        "wall_s": time.perf_counter() - t_start,
     }
     table = markdown(rows, header)
     (out / "peers.md").write_text(table)
     (out / "peers.json").write_text(
         json.dumps(
-            {"header": header, "rows": [asdict(r) for r in rows], "details": details},
+            _json_clean({"header": header, "rows": [asdict(r) for r in rows], "details": details}),
             indent=1,
-            default=lambda x: None if isinstance(x, float) and math.isnan(x) else str(x),
+            default=_nan_to_none,
         )
     )
     print()
@@ -500,11 +827,7 @@ def main(argv: list[str] | None = None) -> int:
     if skipped:
         print("skipped: " + "; ".join(f"{k}: {v}" for k, v in skipped.items()))
     print(f"results: {out / 'peers.json'}, {out / 'peers.md'}")
-    medians = [r.mismatch_median for r in rows if not r.error]
-    if medians:
-        print(
-            f"(median of the per-set median mismatches: {100 * statistics.median(medians):.1f} %)"
-        )
+    print(f"wall time {header['wall_s'] / 60:.1f} min")
     return 0
 
 
