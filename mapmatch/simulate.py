@@ -750,7 +750,8 @@ def simulate_trip(
         grid, np.concatenate(([0.0], np.cumsum(dt_grid))), stops
     )
     dense_t = np.arange(0.0, knot_t[-1], 1.0 / _DENSE_HZ)
-    dense_s = np.interp(dense_t, knot_t, knot_s)
+    # the 1 m grid runs up to a metre past the route's end: the car stops at the end
+    dense_s = np.minimum(np.interp(dense_t, knot_t, knot_s), total)
     dense_v = np.interp(dense_s, grid, v_grid)
     dense_x, dense_y = np.interp(dense_s, s_vert, x), np.interp(dense_s, s_vert, y)
     ahead_x = np.interp(np.minimum(dense_s + 1.0, total), s_vert, x)

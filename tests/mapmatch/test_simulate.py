@@ -34,6 +34,10 @@ def test_truth_is_a_connected_route_of_the_stated_length(default_net: roadnets.R
     assert driven == pytest.approx(trip.length_m, abs=0.01)
     assert set(trip.true_edge.tolist()) <= set(edges)
     assert len(trip.trace) == len(trip.true_edge)
+    # offsets stay on their edges, up to the last fix too (the 1 m speed grid overshoots)
+    for t in simulate_trips(default_net, SimulationConfig.noise_free(), count=10, seed=40):
+        assert all(0 <= e.start_offset_m <= e.end_offset_m <= e.length_m + 1e-6 for e in t.edges)
+        assert np.all(t.true_offset_m <= a.edge_length_m[t.true_edge] + 1e-6)
 
 
 def test_simulated_routes_obey_turn_restrictions(default_net: roadnets.RoadNetwork) -> None:
