@@ -169,6 +169,7 @@ class Row:
     match_s: float = math.nan
     repeats: int = 0
     points_per_s: float = math.nan
+    cpu_points_per_s: float = math.nan
     ours_ratio: float = math.nan
     mismatch_mean: float = math.nan
     mismatch_median: float = math.nan
@@ -422,6 +423,10 @@ def score_result(truth: dict[str, list[list[float]]], result: dict[str, Any]) ->
     return Accuracy(scoring.summarize(scores), failed, length_err, per_trace)
 
 
+def _rate(points: int, seconds: float | None) -> float:
+    return points / seconds if seconds else math.nan
+
+
 def _fmt(x: float | None, nd: int = 2) -> str:
     if x is None or (isinstance(x, float) and math.isnan(x)):
         return "-"
@@ -479,9 +484,10 @@ def detail_markdown(rows: list[Row]) -> str:
     """Every row: speed, failures, route mismatch, length error, memory."""
     lines = [
         "| extract | set | input | peer | traces | points | failed | load s | match s "
-        "| points/s | ours ÷ peer | mismatch mean | mismatch median | precision | recall "
-        "| length err mean | abs length err mean | length within 1 % | peak RSS MB |",
-        "|---|---|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|",
+        "| points/s | CPU points/s | ours ÷ peer | mismatch mean | mismatch median "
+        "| precision | recall | length err mean | abs length err mean | length within 1 % "
+        "| peak RSS MB |",
+        "|---|---|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|",
     ]
     for r in rows:
         peer = PEERS[r.peer].label if r.peer in PEERS else r.peer
@@ -490,14 +496,15 @@ def detail_markdown(rows: list[Row]) -> str:
         if r.error:
             lines.append(
                 f"| {r.extract} | {_set_label(r)} | {r.input} | {peer} | {r.traces} "
-                f"| - | - | - | - | - | - | - | - | - | - | - | - | - | - | "
+                f"| - | - | - | - | - | - | - | - | - | - | - | - | - | - | - | "
                 f"(failed: {r.error[:120]})"
             )
             continue
         lines.append(
             f"| {r.extract} | {_set_label(r)} | {r.input} | {peer} | {r.traces} | {r.points:,} "
             f"| {r.failed} | {_fmt(r.load_s)} | {_fmt(r.match_s, 3)} "
-            f"| {_fmt(r.points_per_s, 0)} | {_fmt(r.ours_ratio, 2)} "
+            f"| {_fmt(r.points_per_s, 0)} | {_fmt(r.cpu_points_per_s, 0)} "
+            f"| {_fmt(r.ours_ratio, 2)} "
             f"| {_pct(r.mismatch_mean)} % | {_pct(r.mismatch_median)} % "
             f"| {_fmt(r.precision, 3)} | {_fmt(r.recall, 3)} "
             f"| {_pct(r.length_err_mean, 2, sign=True)} % | {_pct(r.length_abs_err_mean, 2)} % "
@@ -519,7 +526,10 @@ def markdown(rows: list[Row], header: dict[str, Any]) -> str:
         f"{scoring.DEFAULT_MAX_ANGLE_DEG:g} deg. Input `positions`: time, lon, lat; `full`: "
         "plus heading, speed, accuracy, odometer (FMM, leuven and mappymatch use positions "
         "only, so their one run stands in both; Meili uses the per-point accuracy). "
-        f"Run wall time {header['wall_s'] / 60:.1f} min."
+        f"Run wall time {header['wall_s'] / 60:.1f} min; load average "
+        f"{header['loadavg_start']:.1f} at the start, {header['loadavg_end']:.1f} at the end "
+        "(other work on the machine inflates wall-clock points/s; `CPU points/s` uses the "
+        "matcher process's CPU time and is inflated far less)."
     )
     return intro + "\n\n" + summary_markdown(rows, key) + "\nAll rows:\n\n" + detail_markdown(rows)
 
@@ -621,6 +631,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     """Run the comparison, print and write the tables."""
     t_start = time.perf_counter()
+    load_start = os.getloadavg()[0]
     a = parse_args(argv)
     extracts = [resolve_extract(e) for e in a.extract]
     sets = parse_sets(a.sets, a.outlier_rate)
@@ -760,6 +771,7 @@ def main(argv: list[str] | None = None) -> int:
                             match_s=float(res["match_s"]),
                             repeats=int(res.get("repeats", 1)),
                             points_per_s=pps,
+                            cpu_points_per_s=_rate(res["points"], res.get("match_cpu_s")),
                             mismatch_mean=acc.summary.mismatch_mean,
                             mismatch_median=acc.summary.mismatch_median,
                             precision=acc.summary.precision,
@@ -812,6 +824,8 @@ def main(argv: list[str] | None = None) -> int:
         "fmm": fmm_files,
         "command": " ".join([Path(sys.executable).name, *sys.argv]),
         "wall_s": time.perf_counter() - t_start,
+        "loadavg_start": load_start,
+        "loadavg_end": os.getloadavg()[0],
     }
     table = markdown(rows, header)
     (out / "peers.md").write_text(table)

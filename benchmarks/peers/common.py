@@ -5,8 +5,10 @@ A runner is started as ``PYTHON run_<peer>.py JOB.json``. The job file holds
 runner loads the network once (timed as ``load_s``), matches the first trace once as a warm-up
 (not timed), then matches every trace ``repeats`` times over, timing only the matching calls;
 ``match_s`` is the median over the passes of one pass's total (``match_s_runs`` lists them
-all). It writes ``{"peer", "load_s", "match_s", "match_s_runs", "points", "peak_rss_mb",
-"settings", "results": [...]}`` where each result (from the first pass) is
+all; ``match_cpu_s`` is the same median of the process's CPU time, which other load on a shared
+machine inflates far less). It writes ``{"peer", "load_s", "match_s", "match_s_runs",
+"match_cpu_s", "points", "peak_rss_mb", "settings", "results": [...]}`` where each result (from
+the first pass) is
 ``{"trace_id", "geometry": [[[lon, lat], ...], ...], "error"}``.
 """
 
@@ -122,20 +124,23 @@ def run_peer(
             traceback.print_exc()
     repeats = max(1, int(job.get("repeats", 1)))
     runs: list[float] = []
+    cpu_runs: list[float] = []
     results: list[dict[str, Any]] = []
     for k in range(repeats):
-        total = 0.0
+        total = cpu = 0.0
         for tr, prepared in zip(traces, inputs, strict=True):
-            t1 = time.perf_counter()
+            t1, c1 = time.perf_counter(), time.process_time()
             try:
                 raw = match(ctx, prepared)
             except Exception as exc:
                 total += time.perf_counter() - t1
+                cpu += time.process_time() - c1
                 if k == 0:
                     error = f"{type(exc).__name__}: {exc}"
                     results.append({"trace_id": tr.trace_id, "geometry": [], "error": error})
                 continue
             total += time.perf_counter() - t1
+            cpu += time.process_time() - c1
             if k > 0:
                 continue
             try:
@@ -145,12 +150,14 @@ def run_peer(
                 error = f"{type(exc).__name__}: {exc}"
                 results.append({"trace_id": tr.trace_id, "geometry": [], "error": error})
         runs.append(total)
+        cpu_runs.append(cpu)
     match_s = statistics.median(runs)
     out = {
         "peer": peer,
         "load_s": load_s,
         "match_s": match_s,
         "match_s_runs": runs,
+        "match_cpu_s": statistics.median(cpu_runs),
         "repeats": repeats,
         "points": sum(len(t) for t in traces),
         "peak_rss_mb": peak_rss_mb(),
