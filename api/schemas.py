@@ -81,12 +81,17 @@ class PointIn(BaseModel):
 
     model_config = ConfigDict(extra="ignore", populate_by_name=True)
 
-    time: TimeValue = Field(
+    time: TimeValue | None = Field(
+        default=None,
         validation_alias=AliasChoices("time", "t", "timestamp"),
         description=(
-            "Epoch seconds, or an ISO-8601 timestamp (naive = UTC). Aliases `t`, `timestamp`. "
-            "Points out of time order are sorted, and a point repeating an earlier time is "
-            "dropped (the first one kept); both are reported in `stats.warnings`."
+            "Epoch seconds (milli-, micro- and nanosecond epochs are recognised by size and "
+            "converted), or an ISO-8601 timestamp (naive = UTC). Aliases `t`, `timestamp`. "
+            "Optional: without a time in any point the trace is matched by distance only "
+            "(`stats.time_source` = `absent`); some points with and some without is a 422. "
+            "Points out of time order are sorted; points sharing a time are all kept in "
+            "order; a point repeating an earlier one exactly is merged; all reported in "
+            "`stats`."
         ),
         examples=[1700000000.0, "2023-11-14T22:13:20Z"],
     )
@@ -395,7 +400,7 @@ class PointProperties(BaseModel):
 
     kind: Literal["point"] = Field(description="Marks a point Feature.")
     index: int = Field(description="0-based index of the point after sorting.")
-    time: float = Field(description="Epoch seconds.")
+    time: float | None = Field(description="Epoch seconds; null when the trace has no times.")
     matched: bool = Field(description="Whether the point was placed on a road.")
     u: int | None = Field(description="OSM node id where the matched edge starts.")
     v: int | None = Field(description="OSM node id where the matched edge ends.")
@@ -437,11 +442,25 @@ class DistanceCheckOut(BaseModel):
 class StatsOut(BaseModel):
     """Counts and timings of the match."""
 
-    points: int = Field(description="Points after sorting and dropping repeated times.")
+    points: int = Field(description="Points after sorting and merging true duplicates.")
     matched_points: int = Field(description="Points placed on a road.")
     candidates: int = Field(description="Candidate road positions considered.")
+    input_rows: int = Field(description="Input points (or file rows) given.")
     reordered_rows: int = Field(description="Input points that were out of time order.")
-    duplicate_time_rows: int = Field(description="Input points dropped for a repeated time.")
+    merged_rows: int = Field(
+        description="Input points merged into an earlier one they repeat exactly (same time, "
+        "position and fields)."
+    )
+    shared_time_rows: int = Field(
+        description="Points kept whose time equals the previous point's (matched by distance)."
+    )
+    dropped_rows: int = Field(
+        description="Source records the reader could not use (NMEA checksum, no fix)."
+    )
+    time_source: Literal["ok", "absent", "implausible"] = Field(
+        description="ok: times used; absent: no times; implausible: the times imply "
+        "impossible speeds between most points. Both of the latter match by distance only."
+    )
     model_points: int = Field(description="Points that entered the HMM.")
     outliers: int = Field(description="Points judged outliers.")
     break_repairs: int = Field(description="Breaks repaired by leaving a point out.")

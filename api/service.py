@@ -356,11 +356,11 @@ def _column(points: Sequence[PointIn], name: str) -> np.ndarray | None:
 
 def _trace_from_points(points: Sequence[PointIn], *, trace_id: str, crs: str) -> mapmatch.Trace:
     times = [p.time for p in points]
-    time_col: object = (
-        np.array(times, dtype=np.float64)
-        if all(isinstance(t, float | int) for t in times)
-        else times
-    )
+    time_col: object = times
+    if all(t is None for t in times):
+        time_col = None  # no times at all: the trace is matched by distance only
+    elif all(isinstance(t, float | int) for t in times):
+        time_col = np.array(times, dtype=np.float64)
     return mapmatch.Trace(
         time=time_col,
         lon=np.array([p.lon for p in points], dtype=np.float64),

@@ -18,6 +18,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "ConfigError",
+    "InputTypeError",
     "InvalidTraceError",
     "MapMatchError",
     "NoCandidatesError",
@@ -79,6 +80,14 @@ class TraceFileError(MapMatchError, ValueError):
         self.path = path
         self.format = format
         super().__init__(msg)
+
+
+class InputTypeError(MapMatchError, TypeError):
+    """
+    A function was given the wrong kind of object (a graph where a network belongs ...).
+
+    The message names the argument, what it got and how to make what it needs.
+    """
 
 
 class ConfigError(MapMatchError, ValueError):

@@ -36,6 +36,7 @@ from mapmatch.models import (
 )
 from mapmatch.result import Diagnostics, MatchResult, MatchStats
 from mapmatch.selection import find_outliers, thin_fixes
+from mapmatch.trace import check_match_inputs
 from mapmatch.viterbi import posteriors, viterbi
 
 if TYPE_CHECKING:
@@ -123,7 +124,10 @@ def match(
     ------
     NoCandidatesError
         No fix has a road within its search radius.
+    InputTypeError
+        ``trace`` is not a :class:`Trace` or ``net`` not a :class:`~roadnets.RoadNetwork`.
     """
+    check_match_inputs(trace, net)
     config = config or MatchConfig()
     timings: dict[str, float] = {}
     clock = time.perf_counter()
@@ -190,7 +194,11 @@ def match(
         matched_points=int(points.matched.sum()),
         candidates=len(cands),
         reordered_rows=trace.report.reordered_rows,
-        duplicate_time_rows=len(trace.report.duplicate_time_rows),
+        input_rows=trace.report.input_rows,
+        merged_rows=len(trace.report.merged_rows),
+        shared_time_rows=trace.report.shared_time_rows,
+        dropped_rows=trace.report.dropped_rows,
+        time_source=trace.report.time_source,
         timings_s=timings,
         warnings=tuple(trace.report.warnings),
         model_points=len(solution.used),

@@ -110,18 +110,30 @@ class MatchedPoints:
 
 @dataclass(frozen=True, slots=True)
 class MatchStats:
-    """Counts and timings of one match."""
+    """
+    Counts and timings of one match.
+
+    ``input_rows``, ``reordered_rows``, ``merged_rows`` (true duplicates merged),
+    ``shared_time_rows`` (points kept that share the previous point's time),
+    ``dropped_rows`` (source records the reader could not use) and ``time_source``
+    (``"ok"``, ``"absent"``, ``"implausible"``: only ``"ok"`` times entered the model) repeat
+    the trace's :class:`~mapmatch.trace.TraceReport`, and ``warnings`` its sentences.
+    """
 
     points: int
     matched_points: int
     candidates: int
     reordered_rows: int
-    duplicate_time_rows: int
     timings_s: dict[str, float]
     warnings: tuple[str, ...]
     model_points: int
     outliers: int
     break_repairs: int
+    input_rows: int = 0
+    merged_rows: int = 0
+    shared_time_rows: int = 0
+    dropped_rows: int = 0
+    time_source: str = "ok"
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary."""
@@ -129,8 +141,12 @@ class MatchStats:
             "points": self.points,
             "matched_points": self.matched_points,
             "candidates": self.candidates,
+            "input_rows": self.input_rows,
             "reordered_rows": self.reordered_rows,
-            "duplicate_time_rows": self.duplicate_time_rows,
+            "merged_rows": self.merged_rows,
+            "shared_time_rows": self.shared_time_rows,
+            "dropped_rows": self.dropped_rows,
+            "time_source": self.time_source,
             "model_points": self.model_points,
             "outliers": self.outliers,
             "break_repairs": self.break_repairs,
@@ -266,7 +282,7 @@ class MatchResult:
                     "properties": {
                         "kind": "point",
                         "index": i,
-                        "time": float(p.time_s[i]),
+                        "time": None if math.isnan(p.time_s[i]) else float(p.time_s[i]),
                         "matched": matched,
                         "u": int(p.u[i]) if matched else None,
                         "v": int(p.v[i]) if matched else None,

@@ -100,7 +100,9 @@ def test_unsorted_and_repeated_times_are_sorted_and_reported(
     assert stats["points"] == len(points)
     # the swapped pair and the repeat appended at the end are both out of time order
     assert stats["reordered_rows"] == 2
-    assert stats["duplicate_time_rows"] == 1
+    assert stats["merged_rows"] == 1  # the repeat is the same fix: merged, and counted
+    assert stats["input_rows"] == len(points) + 1
+    assert stats["time_source"] == "ok"
     assert len(stats["warnings"]) == 2
 
 

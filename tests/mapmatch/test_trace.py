@@ -56,8 +56,17 @@ def test_clean_trace_has_float_arrays_and_empty_report() -> None:
     assert tr.lat.tolist() == LAT
     assert (tr.heading_deg, tr.speed_mps, tr.accuracy_m, tr.odometer_m) == (None,) * 4
     assert tr.report == TraceReport(
-        input_rows=4, reordered_rows=0, duplicate_time_rows=(), warnings=()
+        input_rows=4,
+        reordered_rows=0,
+        merged_rows=(),
+        shared_time_rows=0,
+        dropped_rows=0,
+        time_source="ok",
+        time_unit="s",
+        warnings=(),
     )
+    assert tr.has_time
+    assert tr.segment_starts.tolist() == []
 
 
 def test_arrays_are_read_only() -> None:
@@ -117,10 +126,14 @@ def test_boolean_time_is_refused_with_plain_values() -> None:
         make(time=np.array([True, False, True, False]))
 
 
-def test_epoch_milliseconds_are_refused_with_a_hint() -> None:
-    with pytest.raises(InvalidTraceError, match="divide by 1000") as exc:
-        make(time=[1714550400000, 1714550401000, 1714550402000, 1714550403000])
-    assert exc.value.rows == (0, 1, 2, 3)
+def test_epoch_milliseconds_are_converted_and_reported() -> None:
+    # documented change (issue 12): milliseconds are unambiguous by size, so they are read
+    tr = make(time=[1714550400000, 1714550401000, 1714550402500, 1714550403000])
+    assert tr.time_s.tolist() == [1714550400.0, 1714550401.0, 1714550402.5, 1714550403.0]
+    assert tr.report.time_unit == "ms"
+    assert tr.report.warnings == (
+        "times are epoch milliseconds (e.g. 1714550400000) and were converted to seconds",
+    )
 
 
 # ------------------------------------------------------------------ coordinates
@@ -174,13 +187,15 @@ def test_mismatched_lengths() -> None:
         make(lat=LAT[:3])
 
 
-def test_fewer_than_two_points_after_collapsing() -> None:
-    with pytest.raises(
-        InvalidTraceError, match=r"1 point.* after collapsing 2 repeated time"
-    ) as exc:
-        Trace(time=[5, 5, 5], lon=LON[:3], lat=LAT[:3], trace_id="still")
-    assert "trace 'still'" in str(exc.value)
-    assert exc.value.rows == (1, 2)
+def test_one_time_for_three_positions_keeps_them_all_and_sets_the_times_aside() -> None:
+    # documented change (issue 12): repeated times no longer drop positions
+    tr = Trace(time=[5, 5, 5], lon=LON[:3], lat=LAT[:3], trace_id="still")
+    assert len(tr) == 3
+    assert tr.lon.tolist() == LON[:3]
+    assert tr.report.shared_time_rows == 2
+    assert tr.report.merged_rows == ()
+    assert tr.report.time_source == "implausible"
+    assert not tr.has_time
 
 
 def test_single_point_is_an_error() -> None:
@@ -267,17 +282,26 @@ def test_one_late_first_row_counts_as_one_reordered_row() -> None:
     assert tr.lon.tolist() == [2.0, 3.0, 4.0, 5.0, 1.0]
 
 
-def test_duplicate_times_collapse_keeping_first_input_row() -> None:
-    tr = Trace(
-        time=[0, 1, 1, 2, 0, 1],
-        lon=[1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
-        lat=[10.0, 20.0, 30.0, 40.0, 50.0, 60.0],
-    )
-    assert tr.time_s.tolist() == [0.0, 1.0, 2.0]
-    assert tr.lon.tolist() == [1.0, 2.0, 4.0]
-    assert tr.report.duplicate_time_rows == (2, 4, 5)
+def test_repeated_times_keep_every_position_and_merge_only_true_duplicates() -> None:
+    lon = [7.4200, 7.4201, 7.4202, 7.4203, 7.4200, 7.4201]
+    lat = [43.73] * 6
+    tr = Trace(time=[0, 1, 1, 2, 0, 1], lon=lon, lat=lat)
+    # rows 4 and 5 repeat rows 0 and 1 exactly; row 2 shares row 1's time at another place
+    assert tr.time_s.tolist() == [0.0, 1.0, 1.0, 2.0]
+    assert tr.lon.tolist() == [7.4200, 7.4201, 7.4202, 7.4203]
+    assert tr.report.merged_rows == (4, 5)
+    assert tr.report.shared_time_rows == 1
     assert tr.report.input_rows == 6
-    assert "rows 2, 4, 5 repeat an earlier time and were collapsed" in tr.report.warnings[-1]
+    assert tr.report.reordered_rows == 2
+    assert tr.has_time  # one zero-time step of three moving steps is not "most"
+    assert (
+        "rows 4, 5 repeat an earlier row exactly (same time, position and other fields) "
+        "and were merged into it" in tr.report.warnings
+    )
+    assert (
+        "1 point shares the time of the point before (first at row 2); all are kept in file "
+        "order and those steps are matched by distance only" in tr.report.warnings
+    )
 
 
 @st.composite
@@ -304,7 +328,7 @@ def test_any_permutation_gives_the_same_sorted_trace(
     for name in ("time_s", "lon", "lat", "speed_mps"):
         np.testing.assert_array_equal(getattr(tr, name), getattr(ref, name))
     assert tr.time_s.tolist() == cols["time"]
-    assert tr.report.duplicate_time_rows == ()
+    assert tr.report.merged_rows == ()
     assert (tr.report.reordered_rows == 0) == (perm == sorted(perm))
 
 
@@ -444,9 +468,10 @@ def test_crs_outside_china_is_unchanged() -> None:
     assert tr.lat.tolist() == LAT
 
 
-def test_time_is_strictly_increasing_after_validation() -> None:
+def test_time_is_non_decreasing_after_validation() -> None:
     tr = make(time=[2, 2, 1, 0])
-    assert np.all(np.diff(tr.time_s) > 0)
+    assert np.all(np.diff(tr.time_s) >= 0)
+    assert tr.lon.tolist() == [LON[3], LON[2], LON[0], LON[1]]  # ties keep file order
     assert math.isclose(tr.time_s[-1], 2.0)
 
 
@@ -466,3 +491,242 @@ def test_unparseable_time_names_its_row() -> None:
         Trace(time=["2024-04-04T13:08:28Z", "yesterday"], lon=[7.42, 7.421], lat=[43.73, 43.731])
     assert caught.value.field == "time"
     assert caught.value.rows == (1,)
+
+
+# ------------------------------------------------------------------ issue 12: time is optional
+
+
+def test_issue_12_a_trace_without_times_is_valid_and_says_so() -> None:
+    tr = Trace(lon=LON, lat=LAT, trace_id="plan")
+    assert len(tr) == 4
+    assert np.isnan(tr.time_s).all()
+    assert tr.time_s.dtype == np.float64
+    assert not tr.has_time
+    assert tr.report.time_source == "absent"
+    assert tr.report.time_unit == "none"
+    assert tr.report.warnings == (
+        "the trace has no times: it is matched by distance only (no speed, travel or time terms)",
+    )
+    assert repr(tr) == "Trace('plan', 4 points without times)"
+
+
+@pytest.mark.parametrize("blank", [None, float("nan"), ""])
+def test_issue_12_all_blank_times_are_no_times(blank: object) -> None:
+    tr = make(time=[blank] * 4)
+    assert tr.report.time_source == "absent"
+    assert tr.lon.tolist() == LON  # file order kept
+
+
+def test_issue_12_some_blank_times_are_an_error_naming_them() -> None:
+    with pytest.raises(InvalidTraceError) as exc:
+        make(time=[0, None, 2, float("nan")])
+    assert exc.value.rows == (1, 3)
+    assert "leave the time column out to match by distance only" in str(exc.value)
+
+
+def test_issue_12_untimed_trace_merges_only_a_fix_repeated_in_a_row() -> None:
+    lon = [7.4200, 7.4200, 7.4201, 7.4200]  # back at the start later: a loop, not a repeat
+    tr = Trace(lon=lon, lat=[43.73] * 4)
+    assert tr.lon.tolist() == [7.4200, 7.4201, 7.4200]
+    assert tr.report.merged_rows == (1,)
+
+
+def test_issue_12_two_identical_fixes_stay_a_two_point_trace() -> None:
+    tr = Trace(time=[5, 5], lon=[7.42, 7.42], lat=[43.73, 43.73], trace_id="parked")
+    assert len(tr) == 2
+    assert tr.report.merged_rows == ()
+    assert tr.report.shared_time_rows == 1
+    assert tr.has_time  # nothing moved, so nothing moved impossibly fast
+    assert tr.report.warnings[0] == (
+        "all 2 rows are one fix repeated; 2 are kept so the trace stays a trace "
+        "(its matched length is 0)"
+    )
+    untimed = Trace(lon=[7.42] * 3, lat=[43.73] * 3)
+    assert len(untimed) == 2
+    assert untimed.report.merged_rows == (2,)
+
+
+def test_issue_12_rows_sharing_a_time_keep_their_file_order_when_sorted() -> None:
+    tr = make(time=[3, 1, 1, 2], lon=[7.4204, 7.4201, 7.4202, 7.4203])
+    assert tr.time_s.tolist() == [1.0, 1.0, 2.0, 3.0]
+    assert tr.lon.tolist() == [7.4201, 7.4202, 7.4203, 7.4204]
+    assert tr.report.reordered_rows == 1
+    assert tr.report.shared_time_rows == 1
+
+
+# ------------------------------------------------------------------ issue 12: implausible times
+
+
+def _straight(n: int, step_deg: float) -> tuple[list[float], list[float]]:
+    return [7.42 + i * step_deg for i in range(n)], [43.73] * n
+
+
+def test_issue_12_planner_times_one_second_apart_are_set_aside() -> None:
+    # 0.00125 deg of longitude at 43.73 N is 0.00125 * 111195 m * cos(43.73 deg) = 100.4 m
+    lon, lat = _straight(12, 0.00125)
+    tr = Trace(time=range(12), lon=lon, lat=lat)
+    assert tr.report.time_source == "implausible"
+    assert not tr.has_time
+    assert tr.time_s.tolist() == [float(i) for i in range(12)]  # kept for the output
+    assert tr.report.warnings == (
+        "the times cannot be right: 11 of 11 moving steps imply more than 70 m/s (0 with no "
+        "time between two positions; median 100 m/s); matched by distance only, the times "
+        "are kept for the output",
+    )
+
+
+def test_issue_12_a_few_fast_or_untimed_steps_do_not_set_the_times_aside() -> None:
+    lon, lat = _straight(12, 0.00025)  # 20 m apart
+    times = [0, 2, 4, 5, 8, 10, 10, 14, 16, 18, 20, 22]  # one 20 m/s step, one with dt = 0
+    tr = Trace(time=times, lon=lon, lat=lat)
+    assert tr.has_time
+    assert tr.report.shared_time_rows == 1
+    # half the moving steps impossible is "most": the rule is >= IMPLAUSIBLE_SHARE
+    half = [0, 0, 0, 0, 0, 0, 0, 14, 16, 18, 20, 22][:12]
+    assert not Trace(time=half, lon=lon, lat=lat).has_time
+
+
+def test_issue_12_the_plausibility_rule_uses_the_documented_constants() -> None:
+    from mapmatch.trace import IMPLAUSIBLE_SHARE, MAX_PLAUSIBLE_SPEED_MPS, MOVING_STEP_M
+
+    assert (MAX_PLAUSIBLE_SPEED_MPS, IMPLAUSIBLE_SHARE, MOVING_STEP_M) == (70.0, 0.5, 1.0)
+    lon, lat = _straight(3, 0.0007)  # about 56 m apart
+    assert Trace(time=[0, 0.81, 1.62], lon=lon, lat=lat).has_time  # 69 m/s
+    assert not Trace(time=[0, 0.79, 1.58], lon=lon, lat=lat).has_time  # 71 m/s
+
+
+# ------------------------------------------------------------------ issue 12: units
+
+
+@pytest.mark.parametrize(
+    ("scale", "unit"), [(1, "s"), (1_000, "ms"), (1_000_000, "us"), (1_000_000_000, "ns")]
+)
+def test_issue_12_epoch_units_are_told_apart_by_size(scale: int, unit: str) -> None:
+    seconds = [1714550400, 1714550401, 1714550403, 1714550404]
+    tr = make(time=np.array([s * scale for s in seconds], dtype=np.int64))
+    assert tr.time_s.tolist() == [float(s) for s in seconds]
+    assert tr.report.time_unit == unit
+    assert tr.has_time
+    assert len(tr.report.warnings) == (0 if unit == "s" else 1)
+
+
+def test_issue_12_microsecond_text_epochs_are_converted() -> None:
+    tr = make(time=["1714550400000000", "1714550400500000", "1714550401000000", "1714550402e6"])
+    assert tr.time_s.tolist() == [1714550400.0, 1714550400.5, 1714550401.0, 1714550402.0]
+    assert tr.report.time_unit == "us"
+
+
+def test_issue_12_a_time_column_mixing_units_is_refused_naming_the_odd_rows() -> None:
+    with pytest.raises(InvalidTraceError) as exc:
+        make(time=[1714550400, 1714550401, 1714550402000, 1714550403])
+    msg = str(exc.value)
+    assert (
+        "time mixes units: these rows look like epoch milliseconds while the others are "
+        "epoch seconds in 1 row(s): row 2 = 1.71455e+12" in msg
+    )
+    assert exc.value.rows == (2,)
+
+
+def test_issue_12_times_beyond_nanosecond_epochs_are_refused() -> None:
+    with pytest.raises(InvalidTraceError, match="too large for epoch seconds, milliseconds"):
+        make(time=[1e21, 1e21 + 1, 1e21 + 2, 1e21 + 3])
+
+
+def test_issue_12_float32_epoch_times_are_refused_saying_why() -> None:
+    times = np.array([1714550400, 1714550401, 1714550402, 1714550403], dtype=np.float32)
+    with pytest.raises(InvalidTraceError) as exc:
+        make(time=times, trace_id="f32")
+    assert str(exc.value) == (
+        "trace 'f32': time is stored as float32, which keeps 24 bits: near 1.71455e+09 its "
+        "values can only be 128 s apart, so fixes seconds apart would collapse into repeated "
+        "times; store times as float64 or int64 epoch seconds, or as ISO-8601 text"
+    )
+    assert exc.value.field == "time"
+    frame = pd.DataFrame({"time": times, "lat": LAT, "lon": LON})
+    with pytest.raises(InvalidTraceError, match="float32"):
+        Trace.from_dataframe(frame)
+
+
+def test_issue_12_float32_relative_seconds_are_fine() -> None:
+    tr = make(time=np.array([0.0, 0.5, 1.0, 1.5], dtype=np.float32))
+    assert tr.time_s.tolist() == [0.0, 0.5, 1.0, 1.5]
+
+
+# ------------------------------------------------------------------ issue 12: segments, tables
+
+
+def test_issue_12_segment_labels_give_segment_starts_after_sorting() -> None:
+    tr = make(time=[0, 1, 3, 2], segment=[0, 0, 1, 1])
+    assert tr.segment_starts.tolist() == [2]
+    back = Trace.from_dataframe(tr.to_dataframe())
+    assert back.segment_starts.tolist() == [2]
+    assert tr.slice(1, 4).segment_starts.tolist() == [1]
+    assert tr.slice(2, 4).segment_starts.tolist() == []
+    with pytest.raises(ValueError, match="read-only"):
+        tr.segment_starts[0] = 1
+
+
+def test_issue_12_from_dataframe_with_a_fleet_refuses_naming_the_id_column() -> None:
+    df = pd.DataFrame(
+        {"VehicleID": ["a", "b", "a"], "t": [0, 0, 1], "lat": LAT[:3], "lon": LON[:3]}
+    )
+    with pytest.raises(InvalidTraceError, match=r"the VehicleID column holds 2 ids \('a', 'b'\)"):
+        Trace.from_dataframe(df)
+    assert Trace.from_dataframe(df[df["VehicleID"] == "a"]).trace_id == "a"
+
+
+def test_issue_12_a_geodataframe_in_a_projected_crs_is_read_in_wgs84() -> None:
+    gpd = pytest.importorskip("geopandas")
+    lon = np.array([-122.2920, -122.2930, -122.2940])
+    lat = np.array([37.8058, 37.8060, 37.8063])
+    gdf = gpd.GeoDataFrame(
+        {"time": [0, 5, 10], "speed": [8.0, 9.0, 10.0]},
+        geometry=gpd.points_from_xy(lon, lat),
+        crs="EPSG:4326",
+    ).to_crs("EPSG:26910")  # NAD83 / UTM 10N, metres
+    assert float(gdf.geometry.x.iloc[0]) > 500_000  # really projected
+    tr = Trace.from_dataframe(gdf, trace_id="gdf")
+    np.testing.assert_allclose(tr.lon, lon, atol=1e-8)
+    np.testing.assert_allclose(tr.lat, lat, atol=1e-8)
+    np.testing.assert_array_equal(tr.speed_mps, [8.0, 9.0, 10.0])
+
+
+def test_issue_12_a_geodataframe_of_lines_is_refused_naming_the_rows() -> None:
+    gpd = pytest.importorskip("geopandas")
+    from shapely.geometry import LineString, Point
+
+    gdf = gpd.GeoDataFrame(
+        {"time": [0, 1, 2]},
+        geometry=[Point(7.42, 43.73), LineString([(7.42, 43.73), (7.43, 43.73)]), None],
+        crs="EPSG:4326",
+    )
+    with pytest.raises(InvalidTraceError) as exc:
+        Trace.from_dataframe(gdf)
+    assert "row 1 is a LineString, row 2 is missing" in str(exc.value)
+    assert exc.value.rows == (1, 2)
+
+
+# ------------------------------------------------------------------ issue 12: match() inputs
+
+
+def test_issue_12_match_inputs_must_be_a_trace_and_a_network() -> None:
+    import networkx as nx
+
+    from mapmatch.errors import InputTypeError
+    from mapmatch.trace import check_match_inputs
+
+    tr = make()
+    with pytest.raises(InputTypeError) as exc:
+        check_match_inputs(tr, nx.MultiDiGraph())
+    assert str(exc.value) == (
+        "match(trace, net): net must be a roadnets.RoadNetwork, not a networkx MultiDiGraph; "
+        "convert the graph with roadnets.from_graph(G), or load an extract with "
+        "roadnets.load(path)"
+    )
+    assert isinstance(exc.value, TypeError)
+    with pytest.raises(InputTypeError, match=r"not None; load one with roadnets.load\(path\)"):
+        check_match_inputs(tr, None)
+    with pytest.raises(
+        InputTypeError, match=r"not a pandas DataFrame; build one with .*from_dataframe"
+    ):
+        check_match_inputs(tr.to_dataframe(), None)
