@@ -63,7 +63,7 @@ from mapmatch.batch_outputs import (
 from mapmatch.config import MatchConfig
 from mapmatch.errors import InvalidTraceError, MapMatchError
 from mapmatch.matcher import match
-from mapmatch.trace import Trace, read_traces
+from mapmatch.trace import Trace, read_traces, trace_from_raw
 from mapmatch.trace_readers import read_raw_traces
 
 if TYPE_CHECKING:
@@ -126,6 +126,10 @@ class BatchOptions:
     log_level
         Level of the ``mapmatch`` logger inside tasks (``None``: leave it); the per-trace
         distance warnings are in ``summary.csv`` anyway.
+    id_column
+        The column naming the traces of table files (CSV, Parquet ...); default: the usual
+        id columns (``trace_id``, ``trip_id``, ``vehicle_id`` ...; see
+        :mod:`mapmatch.trace_readers`).
     """
 
     inputs: tuple[str, ...]
@@ -140,6 +144,7 @@ class BatchOptions:
     resume: bool = False
     chunk_traces: int | None = None
     log_level: int | None = None
+    id_column: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -156,6 +161,7 @@ class ChunkTask:
     out_dir: str
     out_format: str
     log_level: int | None
+    id_column: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -225,6 +231,44 @@ class BatchReport:
         """Matched road length of all traces, metres."""
         return float(sum(r.matched_length_m for r in self.rows if r.ok))
 
+    def _ok_sum(self, name: str) -> int:
+        return sum(int(getattr(r, name)) for r in self.rows if r.ok)
+
+    @property
+    def reordered_rows(self) -> int:
+        """Rows sorted into time order, over the matched traces."""
+        return self._ok_sum("reordered_rows")
+
+    @property
+    def merged_rows(self) -> int:
+        """True duplicates merged, over the matched traces."""
+        return self._ok_sum("merged_rows")
+
+    @property
+    def dropped_rows(self) -> int:
+        """Source records the readers could not use, over the matched traces."""
+        return self._ok_sum("dropped_rows")
+
+    @property
+    def shared_time_rows(self) -> int:
+        """Points kept that share the previous point's time, over the matched traces."""
+        return self._ok_sum("shared_time_rows")
+
+    @property
+    def input_rows(self) -> int:
+        """Rows read, over the matched traces."""
+        return self._ok_sum("input_rows")
+
+    @property
+    def time_sources(self) -> dict[str, int]:
+        """Matched traces by what their times were (``ok``, ``absent``, ``implausible``)."""
+        return dict(Counter(r.time for r in self.rows if r.ok).most_common())
+
+    @property
+    def traces_with_warnings(self) -> int:
+        """Matched traces whose validation said something (``warnings`` column)."""
+        return sum(1 for r in self.rows if r.ok and r.warnings)
+
     @property
     def verdicts(self) -> dict[str, int]:
         """Distance-check verdicts of the matched traces, by count."""
@@ -275,7 +319,9 @@ def worker_network(source: str | None, cache_dir: str | None) -> roadnets.RoadNe
         return net
 
 
-def _read_file(path: str, fmt: str | None, display: str) -> list[Trace | str]:
+def _read_file(
+    path: str, fmt: str | None, display: str, id_column: str | None = None
+) -> list[Trace | str]:
     """
     Every trace of a file, or the one-line error of each trace that is invalid.
 
@@ -283,7 +329,7 @@ def _read_file(path: str, fmt: str | None, display: str) -> list[Trace | str]:
     read it once.
     """
     stat = os.stat(path)
-    key = (path, fmt, stat.st_mtime_ns, stat.st_size)
+    key = (path, fmt, id_column, stat.st_mtime_ns, stat.st_size)
     with _FILE_LOCK:
         cached = _LAST_FILE.get("file")
         if cached is not None and cached[0] == key:
@@ -291,17 +337,19 @@ def _read_file(path: str, fmt: str | None, display: str) -> list[Trace | str]:
     default_id = "stdin" if display == STDIN else None
     items: list[Trace | str]
     try:
-        items = list(read_traces(path, format=fmt, default_trace_id=default_id))
+        items = list(
+            read_traces(path, format=fmt, default_trace_id=default_id, id_column=id_column)
+        )
     except InvalidTraceError as exc:
         # One trace is invalid: read the others one by one so that only it fails.
-        raws = read_raw_traces(path, format=fmt, default_trace_id=default_id)
+        raws = read_raw_traces(path, format=fmt, default_trace_id=default_id, id_column=id_column)
         items = []
         for raw in raws:
             if exc.trace_id is not None and raw.trace_id == exc.trace_id:
                 items.append(error_line(exc))
                 continue
             try:
-                items.append(Trace.from_dataframe(raw.frame, trace_id=raw.trace_id))
+                items.append(trace_from_raw(raw))
             except Exception as inner:
                 items.append(error_line(inner))
     with _FILE_LOCK:
@@ -344,7 +392,7 @@ def match_chunk(task: ChunkTask) -> ChunkOutcome:
     out_dir = Path(task.out_dir)
     try:
         net = worker_network(task.network, task.cache_dir)
-        items = _read_file(task.path, task.format, task.display)
+        items = _read_file(task.path, task.format, task.display, task.id_column)
     except Exception as exc:
         err = error_line(exc)
         rows = [
@@ -370,23 +418,13 @@ def match_chunk(task: ChunkTask) -> ChunkOutcome:
                 raise BatchInputError(msg)
             result = match(item, net, task.config)
             write_result(result, out_dir, name, task.out_format)
-            check = result.distance_check
             rows.append(
-                SummaryRow(
-                    trace_id=tid,
+                SummaryRow.matched(
+                    result,
                     source=task.display,
                     index=index,
                     output=name,
-                    status="ok",
-                    points=int(result.stats.points),
-                    matched_points=int(result.stats.matched_points),
-                    breaks=len(result.breaks),
-                    matched_length_m=float(result.matched_length_m),
-                    fused_length_m=float(check.fused_length_m),
-                    relative_error=float(check.relative_error),
-                    verdict=str(check.verdict),
                     seconds=time.perf_counter() - t0,
-                    error="",
                 )
             )
         except Exception as exc:
@@ -414,6 +452,7 @@ def _outcome(rows: list[SummaryRow], started: float, cpu_started: float) -> Chun
 def _fingerprint(options: BatchOptions, net: roadnets.RoadNetwork) -> dict[str, object]:
     return {
         "format": options.format,
+        "id_column": options.id_column,
         "network": {"id": net.network_id, "sha256": net.source_sha256},
         "config": {k: _jsonable(v) for k, v in dataclasses.asdict(options.config).items()},
     }
@@ -506,7 +545,7 @@ def run_batch(
     _check_manifest(out_dir, _fingerprint(options, net), options.resume)
     remove_temporaries(out_dir)
 
-    scans: list[FileScan] = [scan_file(f) for f in files]
+    scans: list[FileScan] = [scan_file(f, id_column=options.id_column) for f in files]
     names = assign_output_names(
         (scan.file.display, ref.index, ref.trace_id) for scan in scans for ref in scan.traces
     )
@@ -625,6 +664,7 @@ def _tasks(
                     out_dir=str(out_dir),
                     out_format=options.format,
                     log_level=options.log_level,
+                    id_column=options.id_column,
                 )
             )
     return tasks

@@ -42,7 +42,18 @@ STDIN = "-"
 
 #: Suffixes of trace files picked up when a folder is searched (``.json`` is left out on
 #: purpose: folders often hold unrelated JSON such as ``run.json``).
-_FOLDER_SUFFIXES = (".csv", ".csv.gz", ".gpx", ".geojson", ".parquet", ".pq")
+_FOLDER_SUFFIXES = (
+    ".csv",
+    ".csv.gz",
+    ".tsv",
+    ".gpx",
+    ".kml",
+    ".nmea",
+    ".nma",
+    ".geojson",
+    ".parquet",
+    ".pq",
+)
 _UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
 _MAX_NAME = 120
 
@@ -127,9 +138,9 @@ def discover_inputs(
     Parameters
     ----------
     inputs
-        Files, folders (searched recursively for ``.csv``, ``.csv.gz``, ``.gpx``,
-        ``.geojson``, ``.parquet`` and ``.pq`` files, hidden entries skipped) and at most one
-        ``-`` (CSV on standard input).
+        Files, folders (searched recursively for ``.csv``, ``.csv.gz``, ``.tsv``, ``.gpx``,
+        ``.kml``, ``.nmea``, ``.nma``, ``.geojson``, ``.parquet`` and ``.pq`` files, hidden
+        entries skipped) and at most one ``-`` (CSV on standard input).
     spool_dir
         Folder where standard input is copied (as ``.stdin-<hash>.csv``) so that worker
         processes can read it like any file.
@@ -201,7 +212,7 @@ def _spool_stdin(stream: BinaryIO, spool_dir: Path) -> InputFile:
     return InputFile(path=str(target.resolve()), display=STDIN, format="csv")
 
 
-def scan_file(file: InputFile) -> FileScan:
+def scan_file(file: InputFile, *, id_column: str | None = None) -> FileScan:
     """
     List the traces of a file without validating their rows.
 
@@ -211,11 +222,15 @@ def scan_file(file: InputFile) -> FileScan:
     ----------
     file
         The file to scan.
+    id_column
+        The column naming the traces of a table (default: the usual id columns).
     """
     try:
         fmt = file.format or infer_format(file.path)
         default_id = "stdin" if file.display == STDIN else None
-        raws = read_raw_traces(file.path, format=fmt, default_trace_id=default_id)
+        raws = read_raw_traces(
+            file.path, format=fmt, default_trace_id=default_id, id_column=id_column
+        )
     except Exception as exc:
         return FileScan(file=file, traces=(), error=error_line(exc))
     refs = tuple(

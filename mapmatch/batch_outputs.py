@@ -43,6 +43,7 @@ if TYPE_CHECKING:
 __all__ = [
     "FORMATS",
     "SUMMARY_NAME",
+    "WARNING_SEPARATOR",
     "SummaryLog",
     "SummaryRow",
     "atomic_write",
@@ -60,6 +61,8 @@ FORMATS = ("geojson", "csv", "parquet")
 #: File name of the per-trace summary in the output folder.
 SUMMARY_NAME = "summary.csv"
 _TMP_PREFIX = ".tmp-"
+#: Joins a trace's warnings in the ``warnings`` column of ``summary.csv``.
+WARNING_SEPARATOR = " | "
 
 
 @dataclass(frozen=True, slots=True)
@@ -85,6 +88,15 @@ class SummaryRow:
         The distance check (NaN when unknown).
     verdict
         ``pass``, ``over``, ``under``, ``incomplete``; empty when failed.
+    time
+        What the trace's times were: ``ok``, ``absent`` or ``implausible`` (matched by
+        distance only, see :class:`~mapmatch.trace.TraceReport`); empty when failed.
+    input_rows, reordered_rows, merged_rows, dropped_rows, shared_time_rows
+        What validation did to the trace's rows: rows read, rows sorted into time order,
+        true duplicates merged, source records the reader dropped, points kept that share the
+        previous point's time (all 0 when failed).
+    warnings
+        The trace's warnings, joined by `` | `` (empty for a clean trace).
     seconds
         Wall time spent on the trace (reading, matching, writing).
     error
@@ -103,6 +115,13 @@ class SummaryRow:
     fused_length_m: float
     relative_error: float
     verdict: str
+    time: str
+    input_rows: int
+    reordered_rows: int
+    merged_rows: int
+    dropped_rows: int
+    shared_time_rows: int
+    warnings: str
     seconds: float
     error: str
 
@@ -135,6 +154,13 @@ class SummaryRow:
             fused_length_m=nan,
             relative_error=nan,
             verdict="",
+            time="",
+            input_rows=0,
+            reordered_rows=0,
+            merged_rows=0,
+            dropped_rows=0,
+            shared_time_rows=0,
+            warnings="",
             seconds=0.0,
             error=error,
         )
@@ -178,6 +204,36 @@ class SummaryRow:
     def to_dict(self) -> dict[str, object]:
         """The row as a plain dictionary."""
         return asdict(self)
+
+    @classmethod
+    def matched(
+        cls, result: MatchResult, *, source: str, index: int, output: str, seconds: float
+    ) -> SummaryRow:
+        """The row of a trace that was matched and written."""
+        check, stats = result.distance_check, result.stats
+        return cls(
+            trace_id=result.trace_id,
+            source=source,
+            index=index,
+            output=output,
+            status="ok",
+            points=int(stats.points),
+            matched_points=int(stats.matched_points),
+            breaks=len(result.breaks),
+            matched_length_m=float(result.matched_length_m),
+            fused_length_m=float(check.fused_length_m),
+            relative_error=float(check.relative_error),
+            verdict=str(check.verdict),
+            time=str(stats.time_source),
+            input_rows=int(stats.input_rows),
+            reordered_rows=int(stats.reordered_rows),
+            merged_rows=int(stats.merged_rows),
+            dropped_rows=int(stats.dropped_rows),
+            shared_time_rows=int(stats.shared_time_rows),
+            warnings=WARNING_SEPARATOR.join(stats.warnings),
+            seconds=seconds,
+            error="",
+        )
 
 
 SUMMARY_COLUMNS = tuple(f.name for f in fields(SummaryRow))

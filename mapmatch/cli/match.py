@@ -77,8 +77,8 @@ def add_parser(subparsers: argparse._SubParsersAction[Any]) -> argparse.Argument
         "match",
         help="match trace files or folders; one output per trace plus summary.csv",
         description=(
-            "Match every trace of the INPUT files and folders (CSV, GPX, GeoJSON, Parquet; "
-            "folders searched recursively; - reads CSV from standard input) and write one "
+            "Match every trace of the INPUT files and folders (CSV, GPX, KML, NMEA, GeoJSON, "
+            "Parquet; folders searched recursively; - reads CSV from standard input) and write one "
             "file per trace, named by its trace id, plus summary.csv with one row per trace. "
             "Runs on all local cores, or on a Dask cluster with --scheduler. A bad file or "
             "trace is recorded in summary.csv and the batch goes on. Exit code 0 when every "
@@ -133,6 +133,13 @@ def add_parser(subparsers: argparse._SubParsersAction[Any]) -> argparse.Argument
         "--resume",
         action="store_true",
         help="skip traces whose outputs in --out are complete from an earlier run",
+    )
+    p.add_argument(
+        "--id-column",
+        metavar="NAME",
+        default=None,
+        help="column naming the traces of CSV/Parquet files (default: trace_id, trip_id, "
+        "track_id, vehicle_id, device_id or id, case-insensitive; see the README)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
     p.add_argument(
@@ -232,9 +239,17 @@ def _human_summary(report: BatchReport) -> str:
     rate = report.points / report.seconds if report.seconds > 0 else 0.0
     verdicts = ", ".join(f"{k} {v}" for k, v in report.verdicts.items()) or "none"
     resumed = f" ({report.resumed} from an earlier run)" if report.resumed else ""
+    sources = report.time_sources
+    untimed = sum(v for k, v in sources.items() if k != "ok")
+    times = ", ".join(f"{k} {v}" for k, v in sources.items()) or "none"
     lines = [
         f"traces    {report.traces_ok} ok, {len(failed)} failed, from {files} file(s){resumed}",
         f"points    {report.points:,} matched traces' points",
+        f"rows      {report.input_rows:,} read: {report.reordered_rows:,} reordered, "
+        f"{report.merged_rows:,} merged (true duplicates), {report.dropped_rows:,} dropped; "
+        f"{report.shared_time_rows:,} share a time (kept)",
+        f"times     {times}" + (f" ({untimed} matched by distance only)" if untimed else ""),
+        f"warnings  {report.traces_with_warnings} trace(s) with warnings (see {SUMMARY_NAME})",
         f"length    {report.matched_length_m / 1000:,.3f} km matched",
         f"verdicts  {verdicts}",
         f"time      {report.seconds:.2f} s, {rate:,.0f} points/s on {report.executor}",
@@ -270,6 +285,7 @@ def run(args: argparse.Namespace) -> int:
         resume=args.resume,
         chunk_traces=args.chunk_traces,
         log_level=logging.WARNING if verbose else logging.ERROR,
+        id_column=args.id_column,
     )
     show_bar = not args.quiet and sys.stderr.isatty()
     bar = _Bar() if show_bar else None

@@ -365,7 +365,7 @@ def test_resume_skips_complete_traces_and_redoes_missing_ones(
 def test_read_summary_drops_a_torn_last_line(tmp_path: Path) -> None:
     path = tmp_path / "summary.csv"
     header = ",".join(SUMMARY_COLUMNS)
-    whole = "t1,a.csv,0,t1,ok,10,10,0,100.5,101,0.00497,pass,0.1,"
+    whole = "t1,a.csv,0,t1,ok,10,10,0,100.5,101,0.00497,pass,ok,10,0,0,0,0,,0.1,"
     path.write_text(f"{header}\n{whole}\n{whole.replace('t1', 't2')[:20]}")
     rows = read_summary(path)
     assert [r.trace_id for r in rows] == ["t1"]
@@ -472,3 +472,58 @@ def test_unreachable_scheduler_is_a_usage_error(
     )
     assert code == 2
     assert "cannot reach the Dask scheduler at 'tcp://127.0.0.1:9'" in err
+
+
+# --------------------------------------------------------------------------- issue 12
+
+
+def test_issue_12_fleet_file_is_split_and_every_count_reaches_summary_csv(
+    data_dir: Path, cache_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder = tmp_path / "in"
+    folder.mkdir()
+    traces = data_dir / "traces"
+    for name in ("fleet_interleaved.csv", "box.nmea", "no_time.gpx"):
+        (folder / name).write_bytes((traces / name).read_bytes())
+    out = tmp_path / "out"
+    network = str(data_dir / "west-oakland_us.osm.bz2")
+    argv = [str(folder), "--out", str(out), "--network", network, "--cache-dir", str(cache_dir)]
+    code, stdout, _ = _run([*argv, "--workers", "1"], capsys)
+    rows = _summary(out)
+    assert set(rows) == {"bus-12", "van-7", "box", "8th Street, no times"}, rows
+    assert code == 0, [r["error"] for r in rows.values()]
+    bus, van, box, plan = rows["bus-12"], rows["van-7"], rows["box"], rows["8th Street, no times"]
+    assert (bus["points"], bus["input_rows"], van["points"]) == ("60", "60", "60")
+    assert (bus["index"], van["index"]) == ("0", "1")
+    for row in (bus, van):
+        assert (row["reordered_rows"], row["merged_rows"], row["dropped_rows"]) == ("0", "0", "0")
+        assert (row["time"], row["warnings"]) == ("ok", "")
+    assert (box["dropped_rows"], box["input_rows"], box["time"]) == ("3", "29", "ok")
+    assert box["warnings"].split(" | ")[0] == (
+        "1 NMEA sentence with a wrong checksum was dropped (line 21)"
+    )
+    assert (plan["time"], plan["points"]) == ("absent", "21")
+    assert plan["warnings"].startswith("the trace has no times")
+    assert "rows      170 read: 0 reordered, 0 merged (true duplicates), 3 dropped;" in stdout
+    assert "times     ok 3, absent 1 (1 matched by distance only)" in stdout
+    assert "warnings  2 trace(s) with warnings (see summary.csv)" in stdout
+
+
+def test_issue_12_id_column_flag_groups_by_another_column(
+    data_dir: Path, cache_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    frame = pd.read_csv(data_dir / "traces" / "fleet_interleaved.csv")
+    frame["driver"] = frame["vehicle_id"].map({"bus-12": "ana", "van-7": "bo"})
+    source = tmp_path / "drivers.csv"
+    frame.drop(columns=["vehicle_id"]).to_csv(source, index=False)
+    network = str(data_dir / "west-oakland_us.osm.bz2")
+    base = [str(source), "--network", network, "--cache-dir", str(cache_dir), "--workers", "1"]
+    _run([*base, "--out", str(tmp_path / "one"), "--quiet"], capsys)
+    (alone,) = _summary(tmp_path / "one").values()
+    assert (alone["trace_id"], alone["points"]) == ("drivers", "120")  # one trace, both cars
+    code, _, _ = _run([*base, "--out", str(tmp_path / "two"), "--id-column", "driver"], capsys)
+    rows = _summary(tmp_path / "two")
+    assert code == 0
+    assert {k: r["points"] for k, r in rows.items()} == {"ana": "60", "bo": "60"}
+    run = json.loads((tmp_path / "two" / "run.json").read_text())
+    assert run["fingerprint"]["id_column"] == "driver"
