@@ -171,6 +171,7 @@ class Row:
     points_per_s: float = math.nan
     cpu_points_per_s: float = math.nan
     ours_ratio: float = math.nan
+    ours_cpu_ratio: float = math.nan
     mismatch_mean: float = math.nan
     mismatch_median: float = math.nan
     precision: float = math.nan
@@ -427,6 +428,10 @@ def _rate(points: int, seconds: float | None) -> float:
     return points / seconds if seconds else math.nan
 
 
+def _ratio(ours: float, peer: float) -> float:
+    return ours / peer if peer > 0 and not math.isnan(ours) else math.nan
+
+
 def _fmt(x: float | None, nd: int = 2) -> str:
     if x is None or (isinstance(x, float) and math.isnan(x)):
         return "-"
@@ -449,7 +454,7 @@ def summary_markdown(rows: list[Row], key_peers: list[str]) -> str:
     who = " / ".join(["ours", *labels])
     head = (
         "| extract | set | input | ours points/s | "
-        + " | ".join(f"ours ÷ {lab}" for lab in labels)
+        + " | ".join(f"ours ÷ {lab} (CPU)" for lab in labels)
         + f" | mismatch mean % ({who}) | length error mean % ({who}) "
         f"| length within 1 % ({who}) |"
     )
@@ -466,7 +471,12 @@ def summary_markdown(rows: list[Row], key_peers: list[str]) -> str:
         for p in key_peers:
             peer_row = by_peer.get(p)
             bad = peer_row is None or bool(peer_row.error)
-            ratios.append("-" if bad or peer_row is None else _fmt(peer_row.ours_ratio, 2))
+            if bad or peer_row is None:
+                ratios.append("-")
+            else:
+                cpu = peer_row.ours_cpu_ratio
+                extra = "" if math.isnan(cpu) else f" ({_fmt(cpu, 2)})"
+                ratios.append(_fmt(peer_row.ours_ratio, 2) + extra)
         mism = " / ".join("-" if r is None or r.error else _pct(r.mismatch_mean) for r in order)
         lerr = " / ".join(
             "-" if r is None or r.error else _pct(r.length_err_mean, sign=True) for r in order
@@ -484,7 +494,7 @@ def detail_markdown(rows: list[Row]) -> str:
     """Every row: speed, failures, route mismatch, length error, memory."""
     lines = [
         "| extract | set | input | peer | traces | points | failed | load s | match s "
-        "| points/s | CPU points/s | ours ÷ peer | mismatch mean | mismatch median "
+        "| points/s | CPU points/s | ours ÷ peer (CPU) | mismatch mean | mismatch median "
         "| precision | recall | length err mean | abs length err mean | length within 1 % "
         "| peak RSS MB |",
         "|---|---|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|",
@@ -504,7 +514,7 @@ def detail_markdown(rows: list[Row]) -> str:
             f"| {r.extract} | {_set_label(r)} | {r.input} | {peer} | {r.traces} | {r.points:,} "
             f"| {r.failed} | {_fmt(r.load_s)} | {_fmt(r.match_s, 3)} "
             f"| {_fmt(r.points_per_s, 0)} | {_fmt(r.cpu_points_per_s, 0)} "
-            f"| {_fmt(r.ours_ratio, 2)} "
+            f"| {_fmt(r.ours_ratio, 2)} ({_fmt(r.ours_cpu_ratio, 2)}) "
             f"| {_pct(r.mismatch_mean)} % | {_pct(r.mismatch_median)} % "
             f"| {_fmt(r.precision, 3)} | {_fmt(r.recall, 3)} "
             f"| {_pct(r.length_err_mean, 2, sign=True)} % | {_pct(r.length_abs_err_mean, 2)} % "
@@ -804,9 +814,16 @@ def main(argv: list[str] | None = None) -> int:
                 for r in set_rows:
                     if r.input != inp:
                         continue
-                    ok = ours is not None and not r.error and r.points_per_s > 0
-                    ratio = ours.points_per_s / r.points_per_s if ok and ours else math.nan
-                    rows.append(replace(r, ours_ratio=ratio))
+                    if ours is None or r.error:
+                        rows.append(r)
+                        continue
+                    rows.append(
+                        replace(
+                            r,
+                            ours_ratio=_ratio(ours.points_per_s, r.points_per_s),
+                            ours_cpu_ratio=_ratio(ours.cpu_points_per_s, r.cpu_points_per_s),
+                        )
+                    )
 
     header = {
         "date": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),

@@ -101,7 +101,9 @@ def _row(
         20,
         points=500,
         points_per_s=pps,
+        cpu_points_per_s=pps,
         ours_ratio=ratio,
+        ours_cpu_ratio=ratio * 1.1,
         mismatch_mean=mismatch,
         length_err_mean=lerr,
         within_1pct=within,
@@ -117,7 +119,9 @@ def test_summary_puts_ratios_and_every_peers_accuracy_on_one_line() -> None:
     ]
     table = cp.summary_markdown(rows, ["fmm", "fmm-drop", "valhalla"])
     line = table.strip().splitlines()[-1]
-    assert line.startswith("| monaco_2020 | 15 s / 10 m | positions | 2,000 | 0.50 | - | 2.00 |")
+    assert line.startswith(
+        "| monaco_2020 | 15 s / 10 m | positions | 2,000 | 0.50 (0.55) | - | 2.00 (2.20) |"
+    )
     assert "| 1.0 / 25.0 / - / 2.0 |" in line
     assert "| +0.2 / +20.0 / - / -1.0 |" in line
     assert "| 95 / 0 / - / 80 |" in line
