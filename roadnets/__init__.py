@@ -12,6 +12,7 @@ from roadnets.errors import (
     NoDrivableRoadsError,
     RoadNetworkError,
 )
+from roadnets.graph_import import from_graph
 from roadnets.loader import DEFAULT_NETWORK, default_network_path, load
 from roadnets.network import NetworkInfo, RoadNetwork
 from roadnets.routing import PathTable
@@ -32,5 +33,6 @@ __all__ = [
     "RoadNetwork",
     "RoadNetworkError",
     "default_network_path",
+    "from_graph",
     "load",
 ]
