@@ -64,6 +64,10 @@ class NetworkArrays:
         next one and belongs to edge ``seg_edge[s]`` (one per geometry; twins share it).
     banned_in, banned_out
         Turn restrictions: the move from edge ``banned_in[i]`` onto ``banned_out[i]`` is banned.
+    banned_seq_ptr, banned_seq_edge
+        Via-way turn restrictions: driving the edges
+        ``banned_seq_edge[banned_seq_ptr[i]:banned_seq_ptr[i + 1]]`` one right after the other
+        is banned (at least three edges: from, via..., to).
     """
 
     node_osm_id: IntArray
@@ -88,6 +92,8 @@ class NetworkArrays:
     seg_edge: Int32Array
     banned_in: Int32Array
     banned_out: Int32Array
+    banned_seq_ptr: IntArray
+    banned_seq_edge: Int32Array
 
     @property
     def n_nodes(self) -> int:

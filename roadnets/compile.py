@@ -8,6 +8,7 @@ direction.
 from __future__ import annotations
 
 import itertools
+import logging
 from collections import defaultdict
 from typing import TYPE_CHECKING
 
@@ -21,6 +22,8 @@ if TYPE_CHECKING:
     from roadnets.osm_reader import OsmExtract, TurnRestriction
 
 __all__ = ["choose_projector", "compile_network"]
+
+_log = logging.getLogger("roadnets")
 
 _CLASS_INDEX = {name: i for i, name in enumerate(ROAD_CLASSES)}
 
@@ -134,7 +137,9 @@ def _to_arrays(
     seg_start = np.repeat(geom_ptr[indexed], seg_counts) + _ranges(seg_counts)
 
     way_id = np.array([e[2] for e in edges], dtype=np.int64)
-    banned_in, banned_out = _banned_turns(restrictions, u, v, way_id, node_osm_id, out_ptr, order)
+    banned_in, banned_out, seq_ptr, seq_edge = _banned_turns(
+        restrictions, u, v, way_id, node_osm_id, out_ptr, order
+    )
     return NetworkArrays(
         node_osm_id=node_osm_id,
         node_x=xy[:, 0].copy(),
@@ -158,6 +163,8 @@ def _to_arrays(
         seg_edge=seg_edge,
         banned_in=banned_in,
         banned_out=banned_out,
+        banned_seq_ptr=seq_ptr,
+        banned_seq_edge=seq_edge,
     )
 
 
@@ -176,23 +183,119 @@ def _banned_turns(
     node_osm_id: np.ndarray,
     out_ptr: np.ndarray,
     out_edge: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Edge pairs ``(in, out)`` a turn restriction forbids at its via node."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Compile turn restrictions into banned edge pairs and banned edge sequences.
+
+    A via-node restriction bans edge pairs ``(in, out)`` at its node. A via-way restriction
+    bans sequences ``from edge, the via ways' edges end to end, to edge`` (an ``only_*`` one:
+    every other edge leaving the end of the via chain). Restrictions whose ways are missing or
+    do not meet are left out and counted in a log line.
+
+    Returns
+    -------
+    banned_in, banned_out, seq_ptr, seq_edge
+        The pairs, and the sequences as a CSR (sequence ``i`` is
+        ``seq_edge[seq_ptr[i]:seq_ptr[i + 1]]``, at least three edges).
+    """
     by_way: dict[int, list[int]] = defaultdict(list)
     for e, w in enumerate(way_id.tolist()):
         by_way[w].append(e)
     node_of = {int(osm): i for i, osm in enumerate(node_osm_id.tolist())}
     banned: set[tuple[int, int]] = set()
+    sequences: set[tuple[int, ...]] = set()
+    unresolved = 0
     for r in restrictions:
-        via = node_of.get(r.via_node)
-        if via is None:
+        if r.via_node is None:
+            found = _via_way_sequences(r, by_way, u, v, out_ptr, out_edge)
+            sequences.update(found)
+            unresolved += not found
             continue
+        via = node_of.get(r.via_node, -1)
         into = [e for e in by_way.get(r.from_way, []) if v[e] == via]
         onto = {e for e in by_way.get(r.to_way, []) if u[e] == via}
         if not into or not onto:
+            unresolved += 1
             continue
         leaving = out_edge[out_ptr[via] : out_ptr[via + 1]].tolist()
         forbidden = [e for e in leaving if e not in onto] if r.only else sorted(onto)
         banned.update((a, b) for a in into for b in forbidden)
+    if unresolved:
+        _log.info(
+            "%d of %d turn restrictions do not apply to the drivable graph "
+            "(their ways are missing from the extract or do not meet)",
+            unresolved,
+            len(restrictions),
+        )
     pairs = np.array(sorted(banned), dtype=np.int32).reshape(-1, 2)
-    return pairs[:, 0].copy(), pairs[:, 1].copy()
+    ordered = sorted(sequences)
+    seq_ptr = np.concatenate(([0], np.cumsum([len(q) for q in ordered], dtype=np.int64)))
+    seq_edge = np.array([e for q in ordered for e in q], dtype=np.int32)
+    return pairs[:, 0].copy(), pairs[:, 1].copy(), seq_ptr.astype(np.int64), seq_edge
+
+
+def _via_way_sequences(
+    r: TurnRestriction,
+    by_way: dict[int, list[int]],
+    u: np.ndarray,
+    v: np.ndarray,
+    out_ptr: np.ndarray,
+    out_edge: np.ndarray,
+) -> list[tuple[int, ...]]:
+    """Banned edge sequences of one via-way restriction (empty when it does not resolve)."""
+    chains: list[tuple[list[int], int]] = []  # (from edge + via edges, node at the end)
+    first_ends = _way_ends(by_way.get(r.via_ways[0], []), u, v)
+    via_edges = {e for w in r.via_ways for e in by_way.get(w, [])}
+    for start in first_ends:
+        for e_from in by_way.get(r.from_way, []):
+            if int(v[e_from]) != start or e_from in via_edges:
+                continue
+            path, node = [e_from], start
+            for w in r.via_ways:
+                edges = by_way.get(w, [])
+                ends = _way_ends(edges, u, v)
+                if node not in ends or len(ends) != 2:
+                    break
+                walked = _walk(edges, u, v, node, ends[1] if ends[0] == node else ends[0])
+                if walked is None:
+                    break
+                path += walked
+                node = int(v[walked[-1]])
+            else:
+                chains.append((path, node))
+    out: list[tuple[int, ...]] = []
+    to_edges = set(by_way.get(r.to_way, []))
+    for path, node in chains:
+        leaving = out_edge[out_ptr[node] : out_ptr[node + 1]].tolist()
+        onto = [e for e in leaving if e in to_edges]
+        if not onto:
+            continue
+        forbidden = [e for e in leaving if e not in to_edges] if r.only else onto
+        out.extend((*path, e) for e in forbidden)
+    return out
+
+
+def _way_ends(edges: list[int], u: np.ndarray, v: np.ndarray) -> list[int]:
+    """End nodes of a way from its edges: nodes on one piece of it only (sorted)."""
+    pieces = {(min(int(u[e]), int(v[e])), max(int(u[e]), int(v[e]))) for e in edges}
+    count: dict[int, int] = defaultdict(int)
+    for a, b in pieces:
+        count[a] += 1
+        count[b] += 1
+    return sorted(n for n, c in count.items() if c == 1)
+
+
+def _walk(edges: list[int], u: np.ndarray, v: np.ndarray, start: int, end: int) -> list[int] | None:
+    """The way's edges driven from node ``start`` to node ``end``; ``None`` if not drivable."""
+    leaving: dict[int, list[int]] = defaultdict(list)
+    for e in edges:
+        leaving[int(u[e])].append(e)
+    path: list[int] = []
+    node, previous = start, -1
+    while node != end:
+        onward = [e for e in leaving.get(node, []) if int(v[e]) != previous]
+        if len(onward) != 1 or len(path) > len(edges):
+            return None
+        path.append(onward[0])
+        previous, node = node, int(v[onward[0]])
+    return path

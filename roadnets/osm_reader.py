@@ -8,7 +8,8 @@ nodes that are present.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections import Counter
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -53,12 +54,19 @@ class OsmWay:
 
 @dataclass(frozen=True, slots=True)
 class TurnRestriction:
-    """A ``type=restriction`` relation with a via node: ``no_*`` bans, ``only_*`` mandates."""
+    """
+    A car turn restriction: ``no_*`` bans the move, ``only_*`` bans every other one.
+
+    The move runs from ``from_way`` over ``via_node`` onto ``to_way``, or, for a via-way
+    restriction (``via_node`` is ``None``), from ``from_way`` along the whole of each way in
+    ``via_ways`` in turn, then onto ``to_way``.
+    """
 
     from_way: int
-    via_node: int
+    via_node: int | None
     to_way: int
     only: bool
+    via_ways: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -68,6 +76,8 @@ class OsmExtract:
     ways: list[OsmWay]
     restrictions: list[TurnRestriction]
     clipped_ways: int
+    #: ``type=restriction`` relations left out, by reason (not for cars, malformed...).
+    skipped_restrictions: dict[str, int] = field(default_factory=dict)
 
 
 def _osmium_file(path: Path) -> osmium.io.File:
@@ -108,8 +118,9 @@ def read_osm(path: Path) -> OsmExtract:
     Returns
     -------
     OsmExtract
-        Drivable ways with their node coordinates and the tags the graph needs, and the
-        restrictions (``type=restriction`` relations whose via member is a node).
+        Drivable ways with their node coordinates and the tags the graph needs, the car
+        turn restrictions (``type=restriction`` relations via a node or via ways), and the
+        count of restriction relations left out by reason.
 
     Raises
     ------
@@ -118,6 +129,7 @@ def read_osm(path: Path) -> OsmExtract:
     """
     ways: list[OsmWay] = []
     restrictions: list[TurnRestriction] = []
+    skipped: Counter[str] = Counter()
     clipped = 0
     try:
         processor = osmium.FileProcessor(_osmium_file(path)).with_locations()
@@ -147,36 +159,77 @@ def read_osm(path: Path) -> OsmExtract:
                     ways.append(
                         OsmWay(obj.id, ids[start:stop], lon[start:stop], lat[start:stop], kept)
                     )
-            elif isinstance(obj, osmium.osm.Relation):
-                restriction = _restriction(obj)
-                if restriction is not None:
-                    restrictions.append(restriction)
+            elif isinstance(obj, osmium.osm.Relation) and obj.tags.get("type") == "restriction":
+                found, reason = _restrictions(obj)
+                restrictions.extend(found)
+                if reason:
+                    skipped[reason] += 1
     except RuntimeError as exc:
         raise InvalidNetworkSourceError(str(path), str(exc)) from exc
-    return OsmExtract(ways, restrictions, clipped)
+    return OsmExtract(ways, restrictions, clipped, dict(skipped))
 
 
-def _restriction(relation: osmium.osm.Relation) -> TurnRestriction | None:
-    """A car turn restriction with one from way, one via node and one to way, else ``None``."""
+#: The ``restriction`` values that ban (``no_*``) or mandate (``only_*``) a move.
+_TURN_KINDS = frozenset(
+    {
+        "no_right_turn",
+        "no_left_turn",
+        "no_u_turn",
+        "no_straight_on",
+        "no_entry",
+        "no_exit",
+        "only_right_turn",
+        "only_left_turn",
+        "only_straight_on",
+        "only_u_turn",
+    }
+)
+
+#: Vehicle classes an ``except`` tag may name that exempt a car from a restriction.
+_CAR_CLASSES = frozenset({"motorcar", "motor_vehicle", "vehicle"})
+
+
+def _restrictions(relation: osmium.osm.Relation) -> tuple[list[TurnRestriction], str]:
+    """
+    The car turn restrictions of a ``type=restriction`` relation, or why there are none.
+
+    ``no_*`` with several ``from`` or ``to`` ways (``no_entry``, ``no_exit``) gives one ban per
+    pair; ``only_*`` needs exactly one ``to``. The via is one node or a chain of ways.
+    """
     tags = relation.tags
-    if tags.get("type") != "restriction":
-        return None
     kind = (
         tags.get("restriction:motorcar")
         or tags.get("restriction:motor_vehicle")
         or tags.get("restriction")
         or ""
     )
-    if not kind.startswith(("no_", "only_")):
-        return None
-    from_way = via = to_way = None
+    if kind not in _TURN_KINDS:
+        return [], "not a no_* / only_* turn restriction"
+    exempt = {part.strip() for part in (tags.get("except") or "").split(";")}
+    if exempt & _CAR_CLASSES:
+        return [], "cars exempt (except=...)"
+    from_ways: list[int] = []
+    to_ways: list[int] = []
+    via_nodes: list[int] = []
+    via_ways: list[int] = []
     for member in relation.members:
         if member.role == "from" and member.type == "w":
-            from_way = member.ref
-        elif member.role == "via" and member.type == "n":
-            via = member.ref
+            from_ways.append(member.ref)
         elif member.role == "to" and member.type == "w":
-            to_way = member.ref
-    if from_way is None or via is None or to_way is None:
-        return None
-    return TurnRestriction(from_way, via, to_way, kind.startswith("only_"))
+            to_ways.append(member.ref)
+        elif member.role == "via" and member.type == "n":
+            via_nodes.append(member.ref)
+        elif member.role == "via" and member.type == "w":
+            via_ways.append(member.ref)
+    only = kind.startswith("only_")
+    if not from_ways or not to_ways:
+        return [], "no from or no to way"
+    if only and len(to_ways) > 1:
+        return [], "only_* with several to ways"
+    if len(via_nodes) == 1 and not via_ways:
+        via: tuple[int | None, tuple[int, ...]] = (via_nodes[0], ())
+    elif via_ways and not via_nodes:
+        via = (None, tuple(via_ways))
+    else:
+        return [], "via is neither one node nor ways"
+    return [TurnRestriction(f, via[0], t, only, via[1]) for f in from_ways for t in to_ways], ""
