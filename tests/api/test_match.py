@@ -106,6 +106,18 @@ def test_unsorted_and_repeated_times_are_sorted_and_reported(
     assert len(stats["warnings"]) == 2
 
 
+def test_issue_12_points_without_times_match_by_distance(
+    client: httpx.Client, trip, bodies
+) -> None:
+    points = [{"lat": p["lat"], "lon": p["lon"]} for p in bodies.points(trip.trace)]
+    answer = client.post("/v1/match", json={"points": points})
+    assert answer.status_code == 200, answer.text
+    doc = answer.json()
+    assert doc["stats"]["time_source"] == "absent"
+    assert {p["properties"]["time"] for p in _points(doc)} == {None}
+    assert doc["matched_length_m"] == pytest.approx(trip.length_m, rel=0.05)
+
+
 def test_second_network_is_selected_by_id(client: httpx.Client, default_net, oakland_net) -> None:
     listing = client.get("/v1/networks").json()["networks"]
     assert [n["id"] for n in listing] == ["monaco_2020", "west-oakland_us"]
