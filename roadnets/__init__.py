@@ -15,14 +15,18 @@ from roadnets.errors import (
 from roadnets.graph_import import from_graph
 from roadnets.loader import DEFAULT_NETWORK, default_network_path, load
 from roadnets.network import NetworkInfo, RoadNetwork
+from roadnets.routes import DEFAULT_UTURN_COST_M, EdgeRoutes, RouteTable
 from roadnets.routing import PathTable
 from roadnets.spatial import EdgeHits
+from roadnets.turns import TurnGraph
 
 __all__ = [
     "DEFAULT_NETWORK",
+    "DEFAULT_UTURN_COST_M",
     "ROAD_CLASSES",
     "CacheError",
     "EdgeHits",
+    "EdgeRoutes",
     "InvalidNetworkSourceError",
     "MapMatchError",
     "NetworkArrays",
@@ -32,6 +36,8 @@ __all__ = [
     "PathTable",
     "RoadNetwork",
     "RoadNetworkError",
+    "RouteTable",
+    "TurnGraph",
     "default_network_path",
     "from_graph",
     "load",

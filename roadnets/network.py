@@ -13,8 +13,10 @@ import numpy.typing as npt
 from shapely.geometry import LineString
 
 from roadnets.drivable import ROAD_CLASSES
+from roadnets.routes import DEFAULT_UTURN_COST_M, EdgeRoutes, RouteTable, route_pairs, route_table
 from roadnets.routing import PathTable, shortest_path_table
 from roadnets.spatial import EdgeHits, build_rtree, query_edges
+from roadnets.turns import TurnGraph, build_turn_graph
 
 if TYPE_CHECKING:
     from rtree.index import Index
@@ -44,6 +46,8 @@ class NetworkInfo:
     clipped_ways: int
     from_cache: bool
     load_s: float
+    #: Banned edge sequences of via-way restrictions (``turn_restrictions`` counts banned pairs).
+    banned_sequences: int = 0
 
     @property
     def road_km(self) -> float:
@@ -74,6 +78,7 @@ class RoadNetwork:
     load_s: float = 0.0
     precomputed: PathTable | None = field(default=None, repr=False)
     precomputed_bound_m: float = 0.0
+    precomputed_routes: RouteTable | None = field(default=None, repr=False)
     _rtree_lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
     @property
@@ -153,6 +158,81 @@ class RoadNetwork:
             self.arrays, np.arange(self.arrays.n_nodes), np.asarray(bound_m, dtype=np.float64)
         )
         self.precomputed, self.precomputed_bound_m = table, float(bound_m)
+        return table
+
+    @cached_property
+    def turns(self) -> TurnGraph:
+        """The turn graph: legal moves between edges, every turn restriction compiled in."""
+        return build_turn_graph(self.arrays)
+
+    def edge_routes(
+        self,
+        from_edges: npt.NDArray[np.integer[Any]],
+        to_edges: npt.NDArray[np.integer[Any]],
+        bounds_m: float | FloatArray,
+        *,
+        uturn_cost_m: float = DEFAULT_UTURN_COST_M,
+    ) -> EdgeRoutes:
+        """
+        Shortest legal route from the end of each ``from`` edge to the start of its ``to`` edge.
+
+        Edge-based, obeying every turn restriction; U-turns at nodes allowed but each one
+        costs ``uturn_cost_m`` in the search (see :mod:`roadnets.routes`). One search per
+        distinct ``from`` edge with the largest bound of its pairs, stopping once its ``to``
+        edges are reached; answered from the table of :meth:`precompute_routes` instead when
+        it was built with the same U-turn cost and every bound fits in it.
+
+        Parameters
+        ----------
+        from_edges, to_edges
+            Edge pairs (same length).
+        bounds_m
+            One bound or one per pair: metres of route length plus U-turn costs.
+        uturn_cost_m
+            Search-key cost of a U-turn, metres (not added to the reported length).
+        """
+        table = self.precomputed_routes
+        bounds = np.asarray(bounds_m, dtype=np.float64)
+        usable = (
+            table is not None
+            and table.uturn_cost_m == uturn_cost_m
+            and bool(np.all(bounds <= table.bounds_m.min(initial=np.inf)))
+        )
+        return route_pairs(
+            self.arrays,
+            self.turns,
+            from_edges,
+            to_edges,
+            bounds,
+            uturn_cost_m=uturn_cost_m,
+            table=table if usable else None,
+        )
+
+    def route_table(
+        self,
+        sources: npt.NDArray[np.integer[Any]],
+        bounds_m: float | FloatArray,
+        *,
+        uturn_cost_m: float = DEFAULT_UTURN_COST_M,
+    ) -> RouteTable:
+        """Every shortest legal route from each source edge within its bound (full search)."""
+        return route_table(self.arrays, self.turns, sources, bounds_m, uturn_cost_m=uturn_cost_m)
+
+    def precompute_routes(
+        self, bound_m: float, *, uturn_cost_m: float = DEFAULT_UTURN_COST_M
+    ) -> RouteTable:
+        """
+        Shortest legal routes from every edge to every edge within ``bound_m``, kept for reuse.
+
+        The edge-based counterpart of :meth:`precompute_paths` (restrictions obeyed, U-turns
+        counted); :meth:`edge_routes` answers from it whenever the bounds asked for fit.
+        Its size grows with the edges times the edges within reach: measure first
+        (``benchmarks/bench_routing.py`` reports it).
+        """
+        table = self.route_table(
+            np.arange(self.arrays.n_edges), float(bound_m), uturn_cost_m=uturn_cost_m
+        )
+        self.precomputed_routes = table
         return table
 
     @cached_property
@@ -278,6 +358,7 @@ class RoadNetwork:
             clipped_ways=self.clipped_ways,
             from_cache=self.from_cache,
             load_s=self.load_s,
+            banned_sequences=len(a.banned_seq_ptr) - 1,
         )
 
     @cached_property

@@ -1,0 +1,300 @@
+"""The compiled kernels of the edge-based router (:mod:`roadnets.routes`): search and look-up.
+
+One bounded Dijkstra per source over the states of a :class:`~roadnets.turns.TurnGraph`.
+Two things keep it close to a node-based Dijkstra in cost:
+
+- Pruning at plain nodes: at a node, only the first arrival (lowest key) needs to settle every
+  leaving edge; a later arrival can only improve the twin of the first arrival's edge (the
+  first arrival pays the U-turn cost there, a later one does not), so the second arrival
+  settles that one edge and later ones nothing. Arrivals on edges with a restriction, and
+  restricted copies, always use all their transitions.
+- Early stop: given the target edges of each source, a search stops once they are all
+  settled instead of exploring its whole bound.
+
+The heap is a plain binary heap on two arrays; the search is one function without helper
+calls that take arrays (numba counts references to every array passed on each call, which
+cost more than the search itself).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = ["find_records", "search_many"]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _push(hk, hv, size, key, val):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    i = size
+    while i > 0:
+        parent = (i - 1) >> 1
+        if hk[parent] <= key:
+            break
+        hk[i] = hk[parent]
+        hv[i] = hv[parent]
+        i = parent
+    hk[i] = key
+    hv[i] = val
+    return size + 1
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _pop(hk, hv, size):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    key, val = hk[0], hv[0]
+    size -= 1
+    if size > 0:
+        last_k, last_v = hk[size], hv[size]
+        i = 0
+        while True:
+            c = 2 * i + 1
+            if c >= size:
+                break
+            if c + 1 < size and hk[c + 1] < hk[c]:
+                c += 1
+            if hk[c] >= last_k:
+                break
+            hk[i] = hk[c]
+            hv[i] = hv[c]
+            i = c
+        hk[i] = last_k
+        hv[i] = last_v
+    return key, val, size
+
+
+@njit(cache=True, nogil=True)
+def search_many(  # type: ignore[no-untyped-def]  # pragma: no cover
+    trans_ptr,
+    trans_to,
+    state_edge,
+    plain,
+    edge_v,
+    edge_twin,
+    edge_len,
+    edge_time,
+    n_nodes,
+    sources,
+    bounds,
+    uturn_cost,
+    target_ptr,
+    target_edge,
+):
+    """
+    Bounded edge-based Dijkstra from each source state; every settled state is a record.
+
+    A source with targets (``target_edge[target_ptr[i]:target_ptr[i + 1]]``, distinct edges)
+    stops once a state of each is settled; one without explores its whole bound. Records
+    are ``(state, length, time, U-turns, predecessor record)`` in settling (key) order, those
+    of source ``i`` at ``ptr[i]:ptr[i + 1]``; ``target_rec`` gives each target's record.
+
+    Heap items are arrivals at the end of a state's edge (item ``s``) and queued U-turns
+    onto a state (item ``n_states + t``). An arrival with key ``k`` settles at once every
+    next state that is not a U-turn (``k`` is the lowest key queued, so it is final) and
+    queues the U-turn with ``k + uturn_cost``. At a plain state's node only the first
+    arrival does this for every leaving edge; the second settles just the twin of the
+    first's edge (the first reaches it only by a U-turn), later ones nothing, so at most two
+    arrivals per plain node are queued.
+    """
+    n_states = len(state_edge)
+    tent = np.full(n_states, np.inf)  # queued key of a U-turn onto the state
+    t_dist = np.zeros(n_states)
+    t_time = np.zeros(n_states)
+    t_turn = np.zeros(n_states, dtype=np.int16)
+    t_pred = np.full(n_states, -1, dtype=np.int64)
+    srec = np.full(n_states, -1, dtype=np.int64)  # the state's record, once settled
+    touched = np.empty(n_states, dtype=np.int64)
+    first = np.full(n_nodes, -1, dtype=np.int64)
+    first_key = np.full(n_nodes, np.inf)
+    second = np.zeros(n_nodes, dtype=np.bool_)
+    q1 = np.full(n_nodes, np.inf)  # the two lowest keys of arrivals queued at a node
+    q2 = np.full(n_nodes, np.inf)
+    touched_nodes = np.empty(n_nodes, dtype=np.int64)
+    want = np.full(len(edge_len), -1, dtype=np.int64)
+    target_local = np.full(max(len(target_edge), 1), -1, dtype=np.int64)
+    b_state = np.empty(n_states, dtype=np.int32)
+    b_dist = np.empty(n_states)
+    b_time = np.empty(n_states)
+    b_turn = np.empty(n_states, dtype=np.int16)
+    b_pred = np.empty(n_states, dtype=np.int64)
+    pend = np.empty(int(np.max(np.diff(trans_ptr))) + 1 if n_states else 1, dtype=np.int64)
+    heap_cap = len(trans_to) + 2 * n_states + 1  # one push per settle or U-turn at most
+    hk = np.empty(heap_cap)
+    hv = np.empty(heap_cap, dtype=np.int64)
+    cap = max(1024, 16 * len(sources))
+    r_state = np.empty(cap, dtype=np.int32)
+    r_dist = np.empty(cap)
+    r_time = np.empty(cap)
+    r_turn = np.empty(cap, dtype=np.int16)
+    r_pred = np.empty(cap, dtype=np.int64)
+    ptr = np.zeros(len(sources) + 1, dtype=np.int64)
+    target_rec = np.full(len(target_edge), -1, dtype=np.int64)
+    count = 0
+    for i in range(len(sources)):
+        bound = bounds[i]
+        lo, hi = target_ptr[i], target_ptr[i + 1]
+        remaining = hi - lo
+        for j in range(lo, hi):
+            want[target_edge[j]] = j - lo
+            target_local[j - lo] = -1
+        n_touched, n_nodes_touched, size, n_rec = 0, 0, 0, 0
+        # the source arrives at its end node with key 0; it is not settled itself, only
+        # by a loop back to its start
+        item = sources[i]
+        key, dist, time, turns, rec = 0.0, 0.0, 0.0, 0, -1
+        node = edge_v[state_edge[item]]
+        if plain[item]:
+            touched_nodes[0] = node
+            n_nodes_touched = 1
+            q1[node] = 0.0
+        seed = True
+        while True:
+            n_pend = 0
+            if item >= n_states:  # a queued U-turn
+                t = item - n_states
+                if srec[t] < 0 and key <= tent[t]:
+                    pend[0] = t
+                    n_pend = 1
+                    dist, time, turns, rec = t_dist[t], t_time[t], t_turn[t], t_pred[t]
+            else:  # an arrival at the end of state ``item``'s edge
+                e = state_edge[item]
+                if not seed:
+                    rec = srec[item]
+                    dist = b_dist[rec] + edge_len[e]
+                    time = b_time[rec] + edge_time[e]
+                    turns = b_turn[rec]
+                seed = False
+                every = True
+                if plain[item]:
+                    node = edge_v[e]
+                    if first[node] >= 0:
+                        every = False
+                        if first[node] != item and not second[node]:
+                            second[node] = True
+                            t = edge_twin[state_edge[first[node]]]
+                            if t >= 0 and srec[t] < 0 and key < first_key[node] + uturn_cost:
+                                pend[0] = t
+                                n_pend = 1
+                    else:
+                        first[node] = item
+                        first_key[node] = key
+                if every:
+                    twin = edge_twin[e]
+                    for k in range(trans_ptr[item], trans_ptr[item + 1]):
+                        t = trans_to[k]
+                        if srec[t] >= 0:
+                            continue
+                        if state_edge[t] != twin:
+                            pend[n_pend] = t
+                            n_pend += 1
+                            continue
+                        u_key = key + uturn_cost
+                        if u_key <= bound and u_key < tent[t]:
+                            if tent[t] == np.inf:
+                                touched[n_touched] = t
+                                n_touched += 1
+                            tent[t] = u_key
+                            t_dist[t] = dist
+                            t_time[t] = time
+                            t_turn[t] = turns + 1
+                            t_pred[t] = rec
+                            size = _push(hk, hv, size, u_key, n_states + t)
+            for q in range(n_pend):  # settle with key ``key`` and the label above
+                t = pend[q]
+                if tent[t] == np.inf:
+                    touched[n_touched] = t
+                    n_touched += 1
+                tent[t] = key
+                srec[t] = n_rec
+                b_state[n_rec] = t
+                b_dist[n_rec] = dist
+                b_time[n_rec] = time
+                b_turn[n_rec] = turns
+                b_pred[n_rec] = rec
+                e = state_edge[t]
+                if want[e] >= 0:
+                    target_local[want[e]] = n_rec
+                    want[e] = -1
+                    remaining -= 1
+                n_rec += 1
+                arrive = key + edge_len[e]
+                if arrive > bound:
+                    continue
+                if plain[t]:
+                    # a plain node uses its first arrival, and a second one only when it
+                    # comes less than the U-turn cost after the first
+                    m = edge_v[e]
+                    if arrive < q1[m]:
+                        if q1[m] == np.inf:
+                            touched_nodes[n_nodes_touched] = m
+                            n_nodes_touched += 1
+                        q2[m] = q1[m]
+                        q1[m] = arrive
+                    elif arrive < q2[m] and arrive < q1[m] + uturn_cost:
+                        q2[m] = arrive
+                    else:
+                        continue
+                size = _push(hk, hv, size, arrive, t)
+            if size == 0 or (hi > lo and remaining <= 0):
+                break
+            key, item, size = _pop(hk, hv, size)
+        while count + n_rec > cap:
+            grow = cap
+            cap *= 2
+            r_state = np.concatenate((r_state, np.empty(grow, dtype=np.int32)))
+            r_dist = np.concatenate((r_dist, np.empty(grow)))
+            r_time = np.concatenate((r_time, np.empty(grow)))
+            r_turn = np.concatenate((r_turn, np.empty(grow, dtype=np.int16)))
+            r_pred = np.concatenate((r_pred, np.empty(grow, dtype=np.int64)))
+        for k in range(n_rec):
+            r_state[count + k] = b_state[k]
+            r_dist[count + k] = b_dist[k]
+            r_time[count + k] = b_time[k]
+            r_turn[count + k] = b_turn[k]
+            r_pred[count + k] = b_pred[k] + count if b_pred[k] >= 0 else -1
+        for j in range(lo, hi):
+            want[target_edge[j]] = -1
+            if target_local[j - lo] >= 0:
+                target_rec[j] = target_local[j - lo] + count
+        count += n_rec
+        ptr[i + 1] = count
+        for j in range(n_touched):
+            tent[touched[j]] = np.inf
+            srec[touched[j]] = -1
+        for j in range(n_nodes_touched):
+            m = touched_nodes[j]
+            first[m] = -1
+            first_key[m] = np.inf
+            second[m] = False
+            q1[m] = np.inf
+            q2[m] = np.inf
+    return (
+        ptr,
+        r_state[:count],
+        r_dist[:count],
+        r_time[:count],
+        r_turn[:count],
+        r_pred[:count],
+        target_rec,
+    )
+
+
+@njit(cache=True, nogil=True)
+def find_records(ptr, state, order, rank, wanted):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Record of state ``wanted[i]`` in block ``rank[i]`` (-1: no such record or rank)."""
+    out = np.full(len(wanted), -1, dtype=np.int64)
+    for i in range(len(wanted)):
+        r = rank[i]
+        if r < 0:
+            continue
+        lo, hi = ptr[r], ptr[r + 1]
+        end = hi
+        w = wanted[i]
+        while lo < hi:
+            mid = (lo + hi) >> 1
+            if state[order[mid]] < w:
+                lo = mid + 1
+            else:
+                hi = mid
+        if lo < end and state[order[lo]] == w:
+            out[i] = order[lo]
+    return out

@@ -1,0 +1,404 @@
+"""Edge-based bounded shortest routes that obey turn restrictions, many sources at once.
+
+The search runs over the states of a :class:`~roadnets.turns.TurnGraph` (edges, plus restricted
+copies for via-way restrictions), so a route never takes a banned turn nor drives a banned
+sequence. A route from edge ``a`` to edge ``b`` starts where ``a`` ends and stops where ``b``
+starts: its length is the sum of the edges strictly between them, 0 when ``b`` directly
+follows ``a``. ``b == a`` asks for the shortest loop from the end of ``a`` back to its start.
+
+A *U-turn* is a move from an edge onto its reverse twin at a node (``b == edge_twin[a]``
+right away, or anywhere on the route). U-turns are allowed (dead ends need them) but each one
+adds ``uturn_cost_m`` to the search key, not to the reported length, so that a route without a
+U-turn is preferred when it is at most that much longer. A search explores routes whose key
+(length plus U-turn costs) is within its bound.
+
+A search starts from the source edge itself, not from the way it was entered: a via-way
+restriction whose sequence begins before the source edge is not known to it (a matcher that
+routes fix to fix and lands a fix on a via edge could chain a banned sequence over two steps).
+
+The searches are compiled with numba (:mod:`roadnets.route_search`: pruned at junctions without
+restrictions, stopped early once the targets are reached), so that an edge-based search costs
+about what a node-based one does.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+
+from roadnets.route_search import find_records, search_many
+
+if TYPE_CHECKING:
+    from roadnets.arrays import NetworkArrays
+    from roadnets.turns import TurnGraph
+
+__all__ = ["DEFAULT_UTURN_COST_M", "EdgeRoutes", "RouteTable", "route_pairs", "route_table"]
+
+#: Search-key cost of a U-turn at a node, metres (not part of the reported length).
+DEFAULT_UTURN_COST_M = 50.0
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+Int32Array = npt.NDArray[np.int32]
+Int16Array = npt.NDArray[np.int16]
+IndexArray = npt.NDArray[np.integer[Any]]
+
+
+@dataclass(frozen=True, slots=True)
+class RouteTable:
+    """
+    Shortest routes from a set of source edges, as records of the searches' settled states.
+
+    A record is the best route from the end of a source edge to the start of one state
+    (an edge, or a restricted copy of one): its length, free-flow time and U-turn count, and
+    the record of the state before it on the route (-1 when it follows the source directly).
+
+    Attributes
+    ----------
+    sources
+        Source edges, sorted, distinct.
+    bounds_m
+        Search bound of each source: routes whose length plus U-turn costs fits in it.
+    complete
+        Whether each source's search explored its whole bound (else it stopped once the
+        target edges it was asked for were settled, and other edges may be missing).
+    uturn_cost_m
+        The search-key cost of a U-turn the table was built with.
+    ptr
+        Records of ``sources[i]`` are ``ptr[i]:ptr[i + 1]``, in the order they were settled.
+    state, distance_m, time_s, uturns, pred
+        Per record: the state reached, route length (m) and free-flow time (s) from the end
+        of the source to the start of the state's edge, U-turns on the route (the move onto
+        the state's edge included), the predecessor record or -1.
+    turns
+        The turn graph searched (maps states to edges).
+    """
+
+    sources: IntArray
+    bounds_m: FloatArray
+    complete: bool
+    uturn_cost_m: float
+    ptr: IntArray
+    state: Int32Array
+    distance_m: FloatArray
+    time_s: FloatArray
+    uturns: Int16Array
+    pred: Int32Array
+    turns: TurnGraph = field(repr=False)
+    _sorted: list[npt.NDArray[np.integer[Any]]] = field(
+        default_factory=list, init=False, repr=False, compare=False
+    )
+
+    def records(self, from_edges: IndexArray, to_edges: IndexArray) -> IntArray:
+        """
+        Record of the best route for each ``(from, to)`` edge pair, -1 where the table has none.
+
+        "None" means unreachable within the source's bound, or (``complete`` false) not
+        settled before the source's own targets were.
+        """
+        a = np.asarray(from_edges, dtype=np.int64).ravel()
+        b = np.asarray(to_edges, dtype=np.int64).ravel()
+        order = self._order()
+        rank = np.searchsorted(self.sources, a)
+        rank_c = np.minimum(rank, max(len(self.sources) - 1, 0))
+        has_source = rank < len(self.sources)
+        if len(self.sources):
+            has_source &= self.sources[rank_c] == a
+        rank_c = np.where(has_source, rank_c, -1)
+        best = find_records(self.ptr, self.state, order, rank_c, b)
+        lo, hi = self.turns.copy_ptr[b], self.turns.copy_ptr[b + 1]
+        with_copies = np.flatnonzero(has_source & (hi > lo))
+        for j in range(int((hi - lo).max()) if len(with_copies) else 0):
+            sub = with_copies[lo[with_copies] + j < hi[with_copies]]
+            state = self.turns.copy_state[lo[sub] + j].astype(np.int64)
+            found = find_records(self.ptr, self.state, order, rank_c[sub], state)
+            # records of one source are in settling order, which is key order
+            better = (found >= 0) & ((best[sub] < 0) | (found < best[sub]))
+            best[sub[better]] = found[better]
+        return np.asarray(best, dtype=np.int64)
+
+    def lookup(
+        self, from_edges: IndexArray, to_edges: IndexArray
+    ) -> tuple[FloatArray, FloatArray, IntArray]:
+        """
+        Route length (m), free-flow time (s) and U-turn count for arrays of edge pairs.
+
+        Length and time run from the end of ``from`` to the start of ``to`` (0 when ``to``
+        directly follows); ``inf``, ``inf`` and 0 where the table holds no route.
+        """
+        rec = self.records(from_edges, to_edges)
+        return _gather(self, rec)
+
+    def edges(self, from_edge: int, to_edge: int) -> list[int]:
+        """
+        Edges strictly between ``from_edge`` and ``to_edge`` on the route, in driving order.
+
+        Raises
+        ------
+        KeyError
+            The table holds no route for this pair.
+        """
+        rec = int(self.records(np.array([from_edge]), np.array([to_edge]))[0])
+        if rec < 0:
+            raise KeyError((from_edge, to_edge))
+        return self.path(rec)
+
+    def path(self, record: int) -> list[int]:
+        """Edges strictly between the source and the record's state, in driving order."""
+        out: list[int] = []
+        rec = int(self.pred[record])
+        while rec >= 0:
+            out.append(int(self.turns.state_edge[self.state[rec]]))
+            rec = int(self.pred[rec])
+        out.reverse()
+        return out
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held by the table's arrays (not the turn graph)."""
+        arrays: list[npt.NDArray[Any]] = [self.sources, self.bounds_m, self.ptr, self.state]
+        arrays += [self.distance_m, self.time_s, self.uturns, self.pred, *self._sorted]
+        return sum(a.nbytes for a in arrays)
+
+    def _order(self) -> IndexArray:
+        """Record indices sorted by state within each source's block, built on first use."""
+        if not self._sorted:
+            rank = np.repeat(np.arange(len(self.sources), dtype=np.int64), np.diff(self.ptr))
+            order = np.argsort(rank * self.turns.n_states + self.state, kind="stable")
+            self._sorted.append(order.astype(np.int32 if len(order) < 2**31 else np.int64))
+        return self._sorted[0]
+
+
+@dataclass(frozen=True, slots=True)
+class EdgeRoutes:
+    """
+    The best route for each of an array of ``(from edge, to edge)`` pairs.
+
+    Attributes
+    ----------
+    from_edge, to_edge
+        The pairs, as asked.
+    distance_m, time_s
+        Route length and free-flow time from the end of ``from`` to the start of ``to``
+        (0 when ``to`` directly follows ``from``); ``inf`` where there is no route within the
+        pair's bound.
+    uturns
+        U-turns at nodes on the route (turning from an edge onto its reverse twin, the move
+        onto ``to`` included; 0 where there is no route).
+    record
+        Each pair's record in :attr:`table` (-1 where there is no route).
+    table
+        The searches' records, for the routes' edges.
+    """
+
+    from_edge: IntArray
+    to_edge: IntArray
+    distance_m: FloatArray
+    time_s: FloatArray
+    uturns: IntArray
+    record: IntArray
+    table: RouteTable = field(repr=False)
+    _keys: list[IntArray] = field(default_factory=list, init=False, repr=False, compare=False)
+
+    def edges(self, from_edge: int, to_edge: int) -> list[int]:
+        """
+        Edges strictly between ``from_edge`` and ``to_edge`` on the pair's route, in order.
+
+        Raises
+        ------
+        KeyError
+            The pair was not asked for, or has no route.
+        """
+        if not self._keys:  # sorted pair keys, built on first use
+            keys = self.from_edge * self.table.turns.n_edges + self.to_edge
+            order = np.argsort(keys, kind="stable")
+            self._keys.extend((keys[order], order))
+        keys, order = self._keys
+        wanted = from_edge * self.table.turns.n_edges + to_edge
+        i = int(np.searchsorted(keys, wanted))
+        if i == len(keys) or keys[i] != wanted or self.record[order[i]] < 0:
+            raise KeyError((from_edge, to_edge))
+        return self.table.path(int(self.record[order[i]]))
+
+
+def _gather(table: RouteTable, rec: IntArray) -> tuple[FloatArray, FloatArray, IntArray]:
+    ok = rec >= 0
+    dist = np.full(len(rec), np.inf)
+    time = np.full(len(rec), np.inf)
+    turns = np.zeros(len(rec), dtype=np.int64)
+    dist[ok] = table.distance_m[rec[ok]]
+    time[ok] = table.time_s[rec[ok]]
+    turns[ok] = table.uturns[rec[ok]]
+    return dist, time, turns
+
+
+def _search(
+    arrays: NetworkArrays,
+    turns: TurnGraph,
+    sources: IntArray,
+    bounds: FloatArray,
+    uturn_cost_m: float,
+    target_ptr: IntArray,
+    target_edge: IntArray,
+) -> tuple[RouteTable, IntArray]:
+    if not np.isfinite(uturn_cost_m) or uturn_cost_m < 0:
+        msg = f"uturn_cost_m = {uturn_cost_m!r}: give a finite cost >= 0 metres"
+        raise ValueError(msg)
+    edge_time = arrays.edge_length_m / arrays.edge_speed_mps
+    ptr, state, dist, time, uturns, pred, target_rec = search_many(
+        turns.trans_ptr,
+        turns.trans_to,
+        turns.state_edge,
+        turns.plain,
+        arrays.edge_v,
+        arrays.edge_twin,
+        arrays.edge_length_m,
+        edge_time,
+        arrays.n_nodes,
+        sources,
+        bounds,
+        float(uturn_cost_m),
+        target_ptr,
+        target_edge,
+    )
+    if len(state) >= 2**31:
+        msg = (
+            f"{len(state):,} route records do not fit one table; search fewer sources or "
+            "with a smaller bound at a time"
+        )
+        raise MemoryError(msg)
+    table = RouteTable(
+        sources=sources,
+        bounds_m=bounds,
+        complete=len(target_edge) == 0,
+        uturn_cost_m=float(uturn_cost_m),
+        ptr=ptr,
+        state=state,
+        distance_m=dist,
+        time_s=time,
+        uturns=uturns,
+        pred=pred.astype(np.int32),
+        turns=turns,
+    )
+    return table, target_rec
+
+
+def _edges_in(arrays: NetworkArrays, edges: IndexArray, name: str) -> IntArray:
+    out = np.asarray(edges, dtype=np.int64).ravel()
+    bad = np.flatnonzero((out < 0) | (out >= arrays.n_edges))
+    if len(bad):
+        msg = (
+            f"{name}[{bad[0]}] = {out[bad[0]]} is not an edge of the network "
+            f"(0..{arrays.n_edges - 1})"
+        )
+        raise ValueError(msg)
+    return out
+
+
+def route_table(
+    arrays: NetworkArrays,
+    turns: TurnGraph,
+    sources: IndexArray,
+    bounds_m: float | FloatArray,
+    *,
+    uturn_cost_m: float = DEFAULT_UTURN_COST_M,
+) -> RouteTable:
+    """
+    Every best route from each source edge within its bound (complete search trees).
+
+    Parameters
+    ----------
+    arrays, turns
+        The network and its turn graph.
+    sources
+        Source edges (duplicates are searched once, with their largest bound).
+    bounds_m
+        One bound, or one per source: routes whose length plus U-turn costs exceed it are
+        not explored.
+    uturn_cost_m
+        Search-key cost of each U-turn, metres.
+
+    Raises
+    ------
+    ValueError
+        A source is not an edge, or the U-turn cost is negative or not finite.
+    """
+    src = _edges_in(arrays, sources, "sources")
+    bounds = np.broadcast_to(np.asarray(bounds_m, dtype=np.float64), src.shape)
+    order = np.lexsort((-bounds, src))
+    src, bounds = src[order], bounds[order]
+    first = np.ones(len(src), dtype=bool)
+    first[1:] = src[1:] != src[:-1]
+    empty = np.zeros(len(src[first]) + 1, dtype=np.int64)
+    table, _ = _search(
+        arrays,
+        turns,
+        src[first],
+        np.ascontiguousarray(bounds[first]),
+        uturn_cost_m,
+        empty,
+        np.zeros(0, dtype=np.int64),
+    )
+    return table
+
+
+def route_pairs(
+    arrays: NetworkArrays,
+    turns: TurnGraph,
+    from_edges: IndexArray,
+    to_edges: IndexArray,
+    bounds_m: float | FloatArray,
+    *,
+    uturn_cost_m: float = DEFAULT_UTURN_COST_M,
+    table: RouteTable | None = None,
+) -> EdgeRoutes:
+    """
+    The best route for each ``(from, to)`` edge pair: one search per distinct ``from`` edge.
+
+    Each search runs with the largest bound of its pairs and stops as soon as all its ``to``
+    edges are settled, so a pair may get a route longer than its own bound (never one worse
+    than the shortest). ``table`` (a complete :class:`RouteTable` built with the same U-turn
+    cost and bounds at least these) answers instead of searching.
+
+    Parameters
+    ----------
+    arrays, turns
+        The network and its turn graph.
+    from_edges, to_edges
+        Edge pairs, same length.
+    bounds_m
+        One bound, or one per pair (metres of length plus U-turn costs).
+    uturn_cost_m
+        Search-key cost of each U-turn, metres.
+    table
+        A precomputed table to answer from.
+
+    Raises
+    ------
+    ValueError
+        An index is not an edge, the arrays differ in length, or the U-turn cost is bad.
+    """
+    a = _edges_in(arrays, from_edges, "from_edges")
+    b = _edges_in(arrays, to_edges, "to_edges")
+    if len(a) != len(b):
+        msg = f"from_edges has {len(a)} entries but to_edges {len(b)}; give one per pair"
+        raise ValueError(msg)
+    bounds = np.broadcast_to(np.asarray(bounds_m, dtype=np.float64), a.shape)
+    if table is not None:
+        rec = table.records(a, b)
+        return EdgeRoutes(a, b, *_gather(table, rec), rec, table)
+    keys, inverse = np.unique(a * arrays.n_edges + b, return_inverse=True)
+    pair_from, pair_to = keys // arrays.n_edges, keys % arrays.n_edges
+    pair_bound = np.full(len(keys), -np.inf)
+    np.maximum.at(pair_bound, inverse, bounds)
+    src, start = np.unique(pair_from, return_index=True)
+    src_bound = np.maximum.reduceat(pair_bound, start) if len(start) else pair_bound[:0]
+    target_ptr = np.concatenate((start, [len(keys)])).astype(np.int64)
+    found, target_rec = _search(
+        arrays, turns, src, np.ascontiguousarray(src_bound), uturn_cost_m, target_ptr, pair_to
+    )
+    rec = target_rec[inverse]
+    return EdgeRoutes(a, b, *_gather(found, rec), rec, found)
