@@ -509,21 +509,24 @@ def table_frame(frame: pd.DataFrame, *, source_name: str = "<table>") -> pd.Data
     return plain
 
 
-def _decode_text(data: bytes) -> tuple[bytes, tuple[str, ...]]:
-    """UTF-8 bytes without a byte-order mark; UTF-16 converted; notes on what was done."""
+def _decode_text(data: bytes) -> bytes:
+    """The bytes without a UTF-8 byte-order mark; UTF-16 (with its mark) converted to UTF-8."""
     if data.startswith((b"\xff\xfe", b"\xfe\xff")):
-        return data.decode("utf-16").encode("utf-8"), ()
+        return data.decode("utf-16").encode("utf-8")
     if data.startswith(b"\xef\xbb\xbf"):
-        data = data[3:]
+        return data[3:]
+    return data
+
+
+def _latin1_note(data: bytes) -> str:
+    """Why a CSV is read as Latin-1: where it stops being UTF-8."""
     try:
         data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        note = (
-            f"the file is not UTF-8 (byte {exc.start + 1}); it was read as Latin-1, so check "
-            "accented text"
-        )
-        return data.decode("latin-1").encode("utf-8"), (note,)
-    return data, ()
+        where = f" (byte {exc.start + 1})"
+    else:  # pragma: no cover - only called after pandas failed to decode
+        where = ""
+    return f"the file is not UTF-8{where}; it was read as Latin-1, so check accented text"
 
 
 _COMMA_NUMBER = re.compile(r"^\s*\"?[-+]?\d+,\d+\"?\s*$")
@@ -567,32 +570,14 @@ def _read_csv(data: bytes, ctx: _Context) -> list[RawTrace]:
         except (OSError, EOFError) as exc:
             msg = f"is not valid gzip: {exc}"
             raise ctx.error(msg) from exc
-    data, notes = _decode_text(data)
+    data = _decode_text(data)
     sep, decimal, skip = _csv_dialect(data)
+    notes: tuple[str, ...] = ()
     try:
-        header = pd.read_csv(io.BytesIO(data), nrows=0, sep=sep, skiprows=skip)
-    except pd.errors.EmptyDataError as exc:
-        msg = "is empty; expected a header line and rows"
-        raise ctx.error(msg) from exc
-    except (pd.errors.ParserError, ValueError) as exc:
-        msg = f"is not readable as CSV: {exc}"
-        raise ctx.error(msg) from exc
-    id_cols = _id_columns([str(c) for c in header.columns], ctx)
-    try:
-        frame = pd.read_csv(
-            io.BytesIO(data),
-            sep=sep,
-            decimal=decimal,
-            skiprows=skip,
-            skip_blank_lines=False,
-            dtype=dict.fromkeys(id_cols, str) if id_cols else None,
-        )
-    except pd.errors.EmptyDataError as exc:
-        msg = "is empty; expected a header line and rows"
-        raise ctx.error(msg) from exc
-    except (pd.errors.ParserError, UnicodeDecodeError, ValueError) as exc:
-        msg = f"is not readable as CSV: {exc}"
-        raise ctx.error(msg) from exc
+        frame = _csv_frame(data, ctx, sep=sep, decimal=decimal, skip=skip, encoding="utf-8")
+    except UnicodeDecodeError:
+        notes = (_latin1_note(data),)
+        frame = _csv_frame(data, ctx, sep=sep, decimal=decimal, skip=skip, encoding="latin-1")
     # Blank lines are not data: drop them but keep the line numbers of the others right
     # (header = line 1 + skip, first data row = line 2 + skip; one line per record assumed).
     keep = frame.notna().any(axis=1).to_numpy()
@@ -601,6 +586,34 @@ def _read_csv(data: bytes, ctx: _Context) -> list[RawTrace]:
         frame = frame.loc[keep]
     traces = group_rows(frame.reset_index(drop=True), numbers=numbers, label="line", ctx=ctx)
     return [_with_notes(t, notes) for t in traces]
+
+
+def _csv_frame(
+    data: bytes, ctx: _Context, *, sep: str, decimal: str, skip: int, encoding: str
+) -> pd.DataFrame:
+    """The CSV's table, id columns read as text; UnicodeDecodeError passes through."""
+    try:
+        header = pd.read_csv(io.BytesIO(data), nrows=0, sep=sep, skiprows=skip, encoding=encoding)
+        id_cols = _id_columns([str(c) for c in header.columns], ctx)
+        return pd.read_csv(
+            io.BytesIO(data),
+            sep=sep,
+            decimal=decimal,
+            skiprows=skip,
+            skip_blank_lines=False,
+            encoding=encoding,
+            dtype=dict.fromkeys(id_cols, str) if id_cols else None,
+        )
+    except pd.errors.EmptyDataError as exc:
+        msg = "is empty; expected a header line and rows"
+        raise ctx.error(msg) from exc
+    except UnicodeDecodeError:
+        raise
+    except TraceFileError:
+        raise
+    except (pd.errors.ParserError, ValueError) as exc:
+        msg = f"is not readable as CSV: {exc}"
+        raise ctx.error(msg) from exc
 
 
 def _with_notes(raw: RawTrace, notes: tuple[str, ...], dropped: int = 0) -> RawTrace:
