@@ -232,6 +232,7 @@ class RoadNetwork:
         table = self.route_table(
             np.arange(self.arrays.n_edges), float(bound_m), uturn_cost_m=uturn_cost_m
         )
+        table.records(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))  # its index
         self.precomputed_routes = table
         return table
 

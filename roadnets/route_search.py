@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["find_records", "search_many"]
+__all__ = ["find_records", "gather", "group_pairs", "search_many"]
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -298,3 +298,73 @@ def find_records(ptr, state, order, rank, wanted):  # type: ignore[no-untyped-de
         if lo < end and state[order[lo]] == w:
             out[i] = order[lo]
     return out
+
+
+@njit(cache=True, nogil=True)
+def group_pairs(from_edge, to_edge, bounds, n_edges):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    Group edge pairs by source for :func:`search_many`, in ``O(pairs + edges)``.
+
+    Returns the sorted distinct sources, each one's largest bound, the CSR of its distinct
+    target edges, and for each pair the index of its target in that CSR.
+    """
+    n = len(from_edge)
+    slot = np.full(n_edges, -1, dtype=np.int64)
+    found = np.empty(n, dtype=np.int64)
+    n_src = 0
+    for i in range(n):
+        if slot[from_edge[i]] < 0:
+            slot[from_edge[i]] = n_src
+            found[n_src] = from_edge[i]
+            n_src += 1
+    order = np.argsort(found[:n_src])
+    rank = np.empty(n_src, dtype=np.int64)
+    rank[order] = np.arange(n_src)
+    sources = found[:n_src][order]
+    src_bound = np.full(n_src, -np.inf)
+    start = np.zeros(n_src + 1, dtype=np.int64)
+    for i in range(n):
+        r = rank[slot[from_edge[i]]]
+        start[r + 1] += 1
+        src_bound[r] = max(src_bound[r], bounds[i])
+    start = np.cumsum(start)
+    fill = start[:-1].copy()
+    by_source = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        r = rank[slot[from_edge[i]]]
+        by_source[fill[r]] = i
+        fill[r] += 1
+    mark = np.full(n_edges, -1, dtype=np.int64)
+    position = np.empty(n_edges, dtype=np.int64)
+    target_ptr = np.zeros(n_src + 1, dtype=np.int64)
+    target_edge = np.empty(n, dtype=np.int64)
+    pair_target = np.empty(n, dtype=np.int64)
+    count = 0
+    for r in range(n_src):
+        for k in range(start[r], start[r + 1]):
+            i = by_source[k]
+            e = to_edge[i]
+            if mark[e] != r:
+                mark[e] = r
+                position[e] = count
+                target_edge[count] = e
+                count += 1
+            pair_target[i] = position[e]
+        target_ptr[r + 1] = count
+    return sources, src_bound, target_ptr, target_edge[:count], pair_target
+
+
+@njit(cache=True, nogil=True)
+def gather(rec, distance, time, uturns):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Length, time and U-turns of each record (``inf``, ``inf``, 0 for -1)."""
+    n = len(rec)
+    dist_out = np.full(n, np.inf)
+    time_out = np.full(n, np.inf)
+    turns_out = np.zeros(n, dtype=np.int64)
+    for i in range(n):
+        r = rec[i]
+        if r >= 0:
+            dist_out[i] = distance[r]
+            time_out[i] = time[r]
+            turns_out[i] = uturns[r]
+    return dist_out, time_out, turns_out

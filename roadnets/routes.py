@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from roadnets.route_search import find_records, search_many
+from roadnets.route_search import find_records, gather, group_pairs, search_many
 
 if TYPE_CHECKING:
     from roadnets.arrays import NetworkArrays
@@ -216,7 +216,7 @@ class EdgeRoutes:
             keys = self.from_edge * self.table.turns.n_edges + self.to_edge
             order = np.argsort(keys, kind="stable")
             self._keys.extend((keys[order], order))
-        keys, order = self._keys
+        keys, order = self._keys[0], self._keys[1]  # (two threads may both have built it)
         wanted = from_edge * self.table.turns.n_edges + to_edge
         i = int(np.searchsorted(keys, wanted))
         if i == len(keys) or keys[i] != wanted or self.record[order[i]] < 0:
@@ -225,13 +225,7 @@ class EdgeRoutes:
 
 
 def _gather(table: RouteTable, rec: IntArray) -> tuple[FloatArray, FloatArray, IntArray]:
-    ok = rec >= 0
-    dist = np.full(len(rec), np.inf)
-    time = np.full(len(rec), np.inf)
-    turns = np.zeros(len(rec), dtype=np.int64)
-    dist[ok] = table.distance_m[rec[ok]]
-    time[ok] = table.time_s[rec[ok]]
-    turns[ok] = table.uturns[rec[ok]]
+    dist, time, turns = gather(rec, table.distance_m, table.time_s, table.uturns)
     return dist, time, turns
 
 
@@ -390,15 +384,11 @@ def route_pairs(
     if table is not None:
         rec = table.records(a, b)
         return EdgeRoutes(a, b, *_gather(table, rec), rec, table)
-    keys, inverse = np.unique(a * arrays.n_edges + b, return_inverse=True)
-    pair_from, pair_to = keys // arrays.n_edges, keys % arrays.n_edges
-    pair_bound = np.full(len(keys), -np.inf)
-    np.maximum.at(pair_bound, inverse, bounds)
-    src, start = np.unique(pair_from, return_index=True)
-    src_bound = np.maximum.reduceat(pair_bound, start) if len(start) else pair_bound[:0]
-    target_ptr = np.concatenate((start, [len(keys)])).astype(np.int64)
-    found, target_rec = _search(
-        arrays, turns, src, np.ascontiguousarray(src_bound), uturn_cost_m, target_ptr, pair_to
+    src, src_bound, target_ptr, target_edge, pair_target = group_pairs(
+        a, b, np.ascontiguousarray(bounds), arrays.n_edges
     )
-    rec = target_rec[inverse]
+    found, target_rec = _search(
+        arrays, turns, src, src_bound, uturn_cost_m, target_ptr, target_edge
+    )
+    rec = target_rec[pair_target]
     return EdgeRoutes(a, b, *_gather(found, rec), rec, found)

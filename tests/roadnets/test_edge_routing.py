@@ -291,3 +291,24 @@ def test_via_way_restrictions_of_a_real_extract_compile_and_survive_the_cache(
         assert all(a.edge_v[x] == a.edge_u[y] for x, y in itertools.pairwise(seq))
         assert cached.turns.first_banned(seq) == len(seq) - 1
     assert cached.turns.n_states > a.n_edges  # restricted copies of the via edges
+
+
+def test_repeated_pairs_share_one_search_and_no_pairs_is_no_work(
+    default_net: roadnets.RoadNetwork,
+) -> None:
+    a = default_net.arrays
+    source = int(a.banned_in[0])
+    targets = np.arange(a.n_edges)
+    full = default_net.route_table(np.array([source]), 900.0)
+    dist, _, uturns = full.lookup(np.full(a.n_edges, source), targets)
+    far = int(np.flatnonzero(np.isfinite(dist) & (dist > 500.0))[0])
+    # the same pair twice, with a small and a large bound: both get the large bound's route
+    routes = default_net.edge_routes(
+        np.array([source, source]), np.array([far, far]), np.array([10.0, 900.0])
+    )
+    assert routes.distance_m.tolist() == [dist[far], dist[far]]
+    assert routes.uturns.tolist() == [uturns[far], uturns[far]]
+    assert len(routes.table.sources) == 1
+    empty = default_net.edge_routes(np.zeros(0, int), np.zeros(0, int), 300.0)
+    assert len(empty.distance_m) == 0
+    assert len(empty.table.state) == 0
