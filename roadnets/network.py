@@ -172,6 +172,8 @@ class RoadNetwork:
         bounds_m: float | FloatArray,
         *,
         uturn_cost_m: float = DEFAULT_UTURN_COST_M,
+        edge_cost: FloatArray | None = None,
+        turn_cost: FloatArray | None = None,
     ) -> EdgeRoutes:
         """
         Shortest legal route from the end of each ``from`` edge to the start of its ``to`` edge.
@@ -190,11 +192,16 @@ class RoadNetwork:
             One bound or one per pair: metres of route length plus U-turn costs.
         uturn_cost_m
             Search-key cost of a U-turn, metres (not added to the reported length).
+        edge_cost, turn_cost
+            Search costs other than lengths (see :func:`roadnets.routes.route_pairs`).
         """
         table = self.precomputed_routes
         bounds = np.asarray(bounds_m, dtype=np.float64)
         usable = (
             table is not None
+            and not table.weighted
+            and edge_cost is None
+            and turn_cost is None
             and table.uturn_cost_m == uturn_cost_m
             and bool(np.all(bounds <= table.bounds_m.min(initial=np.inf)))
         )
@@ -205,6 +212,8 @@ class RoadNetwork:
             to_edges,
             bounds,
             uturn_cost_m=uturn_cost_m,
+            edge_cost=edge_cost,
+            turn_cost=turn_cost,
             table=table if usable else None,
         )
 
@@ -214,9 +223,24 @@ class RoadNetwork:
         bounds_m: float | FloatArray,
         *,
         uturn_cost_m: float = DEFAULT_UTURN_COST_M,
+        edge_cost: FloatArray | None = None,
+        turn_cost: FloatArray | None = None,
     ) -> RouteTable:
-        """Every shortest legal route from each source edge within its bound (full search)."""
-        return route_table(self.arrays, self.turns, sources, bounds_m, uturn_cost_m=uturn_cost_m)
+        """
+        Every best legal route from each source edge within its bound (complete searches).
+
+        See :func:`roadnets.routes.route_table`; ``edge_cost`` and ``turn_cost`` replace the
+        lengths as search costs (for a fastest route with turn penalties, say).
+        """
+        return route_table(
+            self.arrays,
+            self.turns,
+            sources,
+            bounds_m,
+            uturn_cost_m=uturn_cost_m,
+            edge_cost=edge_cost,
+            turn_cost=turn_cost,
+        )
 
     def precompute_routes(
         self, bound_m: float, *, uturn_cost_m: float = DEFAULT_UTURN_COST_M

@@ -72,6 +72,8 @@ def search_many(  # type: ignore[no-untyped-def]  # pragma: no cover
     edge_twin,
     edge_len,
     edge_time,
+    edge_key,
+    trans_key,
     n_nodes,
     sources,
     bounds,
@@ -87,16 +89,21 @@ def search_many(  # type: ignore[no-untyped-def]  # pragma: no cover
     are ``(state, length, time, U-turns, predecessor record)`` in settling (key) order, those
     of source ``i`` at ``ptr[i]:ptr[i + 1]``; ``target_rec`` gives each target's record.
 
-    Heap items are arrivals at the end of a state's edge (item ``s``) and queued U-turns
-    onto a state (item ``n_states + t``). An arrival with key ``k`` settles at once every
-    next state that is not a U-turn (``k`` is the lowest key queued, so it is final) and
-    queues the U-turn with ``k + uturn_cost``. At a plain state's node only the first
+    Keys grow by ``edge_key`` per edge (the length, or another cost), ``uturn_cost`` per
+    U-turn and, when ``trans_key`` is not empty, ``trans_key[k]`` for transition ``k`` (then
+    no state may be ``plain``: the pruning below assumes the U-turn is the only costed move).
+
+    Heap items are arrivals at the end of a state's edge (item ``s``) and queued moves onto a
+    state (item ``n_states + t``). An arrival with key ``k`` settles at once every next state
+    reached at no extra cost (``k`` is the lowest key queued, so it is final) and queues the
+    others (a U-turn: ``k + uturn_cost``). At a plain state's node only the first
     arrival does this for every leaving edge; the second settles just the twin of the
     first's edge (the first reaches it only by a U-turn), later ones nothing, so at most two
     arrivals per plain node are queued.
     """
     n_states = len(state_edge)
-    tent = np.full(n_states, np.inf)  # queued key of a U-turn onto the state
+    turn_costs = len(trans_key) > 0
+    tent = np.full(n_states, np.inf)  # queued key of a move onto the state
     t_dist = np.zeros(n_states)
     t_time = np.zeros(n_states)
     t_turn = np.zeros(n_states, dtype=np.int16)
@@ -149,7 +156,7 @@ def search_many(  # type: ignore[no-untyped-def]  # pragma: no cover
         seed = True
         while True:
             n_pend = 0
-            if item >= n_states:  # a queued U-turn
+            if item >= n_states:  # a queued U-turn (or costed turn)
                 t = item - n_states
                 if srec[t] < 0 and key <= tent[t]:
                     pend[0] = t
@@ -183,11 +190,13 @@ def search_many(  # type: ignore[no-untyped-def]  # pragma: no cover
                         t = trans_to[k]
                         if srec[t] >= 0:
                             continue
-                        if state_edge[t] != twin:
+                        back = state_edge[t] == twin
+                        extra = trans_key[k] if turn_costs else 0.0
+                        if not back and extra == 0.0:
                             pend[n_pend] = t
                             n_pend += 1
                             continue
-                        u_key = key + uturn_cost
+                        u_key = key + extra + uturn_cost if back else key + extra
                         if u_key <= bound and u_key < tent[t]:
                             if tent[t] == np.inf:
                                 touched[n_touched] = t
@@ -195,7 +204,7 @@ def search_many(  # type: ignore[no-untyped-def]  # pragma: no cover
                             tent[t] = u_key
                             t_dist[t] = dist
                             t_time[t] = time
-                            t_turn[t] = turns + 1
+                            t_turn[t] = turns + 1 if back else turns
                             t_pred[t] = rec
                             size = _push(hk, hv, size, u_key, n_states + t)
             for q in range(n_pend):  # settle with key ``key`` and the label above
@@ -216,7 +225,7 @@ def search_many(  # type: ignore[no-untyped-def]  # pragma: no cover
                     want[e] = -1
                     remaining -= 1
                 n_rec += 1
-                arrive = key + edge_len[e]
+                arrive = key + edge_key[e]
                 if arrive > bound:
                     continue
                 if plain[t]:

@@ -12,6 +12,13 @@ adds ``uturn_cost_m`` to the search key, not to the reported length, so that a r
 U-turn is preferred when it is at most that much longer. A search explores routes whose key
 (length plus U-turn costs) is within its bound.
 
+Search costs: by default the key is the route length plus ``uturn_cost_m`` per U-turn.
+``edge_cost`` (one per edge, e.g. free-flow seconds) replaces the lengths in the key; bounds
+and ``uturn_cost_m`` are then in its unit, while reported lengths and times stay metres and
+seconds. ``turn_cost`` (one per transition of the turn graph, aligned with ``trans_to``;
+:meth:`~roadnets.turns.TurnGraph.transition_edges` names their edges) adds a cost to chosen
+moves, e.g. sharp turns; junctions are then searched without pruning, so it is slower.
+
 A search starts from the source edge itself, not from the way it was entered: a via-way
 restriction whose sequence begins before the source edge is not known to it (a matcher that
 routes fix to fix and lands a fix on a via edge could chain a banned sequence over two steps).
@@ -67,6 +74,9 @@ class RouteTable:
         target edges it was asked for were settled, and other edges may be missing).
     uturn_cost_m
         The search-key cost of a U-turn the table was built with.
+    weighted
+        Whether the search keys were costs given by the caller (``edge_cost``, ``turn_cost``)
+        instead of lengths.
     ptr
         Records of ``sources[i]`` are ``ptr[i]:ptr[i + 1]``, in the order they were settled.
     state, distance_m, time_s, uturns, pred
@@ -81,6 +91,7 @@ class RouteTable:
     bounds_m: FloatArray
     complete: bool
     uturn_cost_m: float
+    weighted: bool
     ptr: IntArray
     state: Int32Array
     distance_m: FloatArray
@@ -234,23 +245,30 @@ def _search(
     turns: TurnGraph,
     sources: IntArray,
     bounds: FloatArray,
-    uturn_cost_m: float,
+    cost: tuple[float, FloatArray | None, FloatArray | None],
     target_ptr: IntArray,
     target_edge: IntArray,
 ) -> tuple[RouteTable, IntArray]:
+    uturn_cost_m, edge_cost, turn_cost = cost
     if not np.isfinite(uturn_cost_m) or uturn_cost_m < 0:
-        msg = f"uturn_cost_m = {uturn_cost_m!r}: give a finite cost >= 0 metres"
+        msg = f"uturn_cost_m = {uturn_cost_m!r}: give a finite cost >= 0"
         raise ValueError(msg)
+    edge_key = _costs(edge_cost, arrays.n_edges, "edge_cost", arrays.edge_length_m)
+    trans_key = _costs(turn_cost, len(turns.trans_to), "turn_cost", np.zeros(0))
+    # the pruning at junctions assumes a U-turn is the only move with a cost of its own
+    plain = turns.plain if turn_cost is None else np.zeros(turns.n_states, dtype=np.bool_)
     edge_time = arrays.edge_length_m / arrays.edge_speed_mps
     ptr, state, dist, time, uturns, pred, target_rec = search_many(
         turns.trans_ptr,
         turns.trans_to,
         turns.state_edge,
-        turns.plain,
+        plain,
         arrays.edge_v,
         arrays.edge_twin,
         arrays.edge_length_m,
         edge_time,
+        edge_key,
+        trans_key,
         arrays.n_nodes,
         sources,
         bounds,
@@ -269,6 +287,7 @@ def _search(
         bounds_m=bounds,
         complete=len(target_edge) == 0,
         uturn_cost_m=float(uturn_cost_m),
+        weighted=edge_cost is not None or turn_cost is not None,
         ptr=ptr,
         state=state,
         distance_m=dist,
@@ -278,6 +297,20 @@ def _search(
         turns=turns,
     )
     return table, target_rec
+
+
+def _costs(given: FloatArray | None, size: int, name: str, default: FloatArray) -> FloatArray:
+    if given is None:
+        return default
+    out = np.ascontiguousarray(given, dtype=np.float64)
+    if out.shape != (size,):
+        msg = f"{name} has shape {out.shape}; give one cost per entry, shape ({size},)"
+        raise ValueError(msg)
+    bad = np.flatnonzero(~np.isfinite(out) | (out < 0))
+    if len(bad):
+        msg = f"{name}[{bad[0]}] = {float(out[bad[0]])}: costs must be finite and >= 0"
+        raise ValueError(msg)
+    return out
 
 
 def _edges_in(arrays: NetworkArrays, edges: IndexArray, name: str) -> IntArray:
@@ -299,6 +332,8 @@ def route_table(
     bounds_m: float | FloatArray,
     *,
     uturn_cost_m: float = DEFAULT_UTURN_COST_M,
+    edge_cost: FloatArray | None = None,
+    turn_cost: FloatArray | None = None,
 ) -> RouteTable:
     """
     Every best route from each source edge within its bound (complete search trees).
@@ -312,13 +347,13 @@ def route_table(
     bounds_m
         One bound, or one per source: routes whose length plus U-turn costs exceed it are
         not explored.
-    uturn_cost_m
-        Search-key cost of each U-turn, metres.
+    uturn_cost_m, edge_cost, turn_cost
+        The search costs (module docstring, "Search costs").
 
     Raises
     ------
     ValueError
-        A source is not an edge, or the U-turn cost is negative or not finite.
+        A source is not an edge, or a cost is negative, not finite or of the wrong shape.
     """
     src = _edges_in(arrays, sources, "sources")
     bounds = np.broadcast_to(np.asarray(bounds_m, dtype=np.float64), src.shape)
@@ -332,7 +367,7 @@ def route_table(
         turns,
         src[first],
         np.ascontiguousarray(bounds[first]),
-        uturn_cost_m,
+        (uturn_cost_m, edge_cost, turn_cost),
         empty,
         np.zeros(0, dtype=np.int64),
     )
@@ -347,6 +382,8 @@ def route_pairs(
     bounds_m: float | FloatArray,
     *,
     uturn_cost_m: float = DEFAULT_UTURN_COST_M,
+    edge_cost: FloatArray | None = None,
+    turn_cost: FloatArray | None = None,
     table: RouteTable | None = None,
 ) -> EdgeRoutes:
     """
@@ -365,15 +402,15 @@ def route_pairs(
         Edge pairs, same length.
     bounds_m
         One bound, or one per pair (metres of length plus U-turn costs).
-    uturn_cost_m
-        Search-key cost of each U-turn, metres.
+    uturn_cost_m, edge_cost, turn_cost
+        The search costs (module docstring, "Search costs").
     table
-        A precomputed table to answer from.
+        A precomputed table to answer from (the costs are then not used).
 
     Raises
     ------
     ValueError
-        An index is not an edge, the arrays differ in length, or the U-turn cost is bad.
+        An index is not an edge, the arrays differ in length, or a cost is bad.
     """
     a = _edges_in(arrays, from_edges, "from_edges")
     b = _edges_in(arrays, to_edges, "to_edges")
@@ -387,8 +424,7 @@ def route_pairs(
     src, src_bound, target_ptr, target_edge, pair_target = group_pairs(
         a, b, np.ascontiguousarray(bounds), arrays.n_edges
     )
-    found, target_rec = _search(
-        arrays, turns, src, src_bound, uturn_cost_m, target_ptr, target_edge
-    )
+    cost = (uturn_cost_m, edge_cost, turn_cost)
+    found, target_rec = _search(arrays, turns, src, src_bound, cost, target_ptr, target_edge)
     rec = target_rec[pair_target]
     return EdgeRoutes(a, b, *_gather(found, rec), rec, found)

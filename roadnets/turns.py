@@ -90,6 +90,14 @@ class TurnGraph:
         states = self.trans_to[lo:hi].astype(np.int64)
         return states, self.state_edge[states].astype(np.int64)
 
+    def transition_edges(self) -> tuple[IntArray, IntArray]:
+        """The edge each transition leaves and the edge it enters (aligned with ``trans_to``)."""
+        owner = np.repeat(np.arange(self.n_states, dtype=np.int64), np.diff(self.trans_ptr))
+        return (
+            self.state_edge[owner].astype(np.int64),
+            self.state_edge[self.trans_to].astype(np.int64),
+        )
+
     def first_banned(self, edges: Sequence[int]) -> int:
         """
         Index of the first edge of a drive that a restriction forbids there, or -1.

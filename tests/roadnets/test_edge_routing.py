@@ -69,27 +69,40 @@ def _unrestricted(arrays: NetworkArrays) -> NetworkArrays:
 
 
 def _reference(
-    arrays: NetworkArrays, turns: TurnGraph, source: int, bound: float, uturn_cost: float
+    arrays: NetworkArrays,
+    turns: TurnGraph,
+    source: int,
+    bound: float,
+    uturn_cost: float,
+    edge_cost: np.ndarray | None = None,
+    turn_cost: np.ndarray | None = None,
 ) -> dict[int, float]:
     """Plain edge-based Dijkstra over the turn graph's states: lowest key per target edge."""
+    edge_key = arrays.edge_length_m if edge_cost is None else edge_cost
     best: dict[int, float] = {}
     done: set[int] = set()
-    heap = [
-        (uturn_cost if turns.state_edge[t] == arrays.edge_twin[source] else 0.0, int(t))
-        for t in turns.successors(source)[0].tolist()
-    ]
+
+    def moves(s: int, arrive: float) -> list[tuple[float, int]]:
+        out = []
+        edge = int(turns.state_edge[s])
+        for k in range(int(turns.trans_ptr[s]), int(turns.trans_ptr[s + 1])):
+            t = int(turns.trans_to[k])
+            key = arrive + (0.0 if turn_cost is None else float(turn_cost[k]))
+            if turns.state_edge[t] == arrays.edge_twin[edge]:
+                key += uturn_cost
+            out.append((key, t))
+        return out
+
+    heap = moves(source, 0.0)
     heapq.heapify(heap)
     while heap:
         key, s = heapq.heappop(heap)
         if s in done or key > bound:
             continue
         done.add(s)
-        edge = int(turns.state_edge[s])
-        best.setdefault(edge, key)
-        arrive = key + float(arrays.edge_length_m[edge])
-        for t in turns.successors(s)[0].tolist():
-            back = turns.state_edge[t] == arrays.edge_twin[edge]
-            heapq.heappush(heap, (arrive + (uturn_cost if back else 0.0), int(t)))
+        best.setdefault(int(turns.state_edge[s]), key)
+        for item in moves(s, key + float(edge_key[turns.state_edge[s]])):
+            heapq.heappush(heap, item)
     return best
 
 
@@ -312,3 +325,48 @@ def test_repeated_pairs_share_one_search_and_no_pairs_is_no_work(
     empty = default_net.edge_routes(np.zeros(0, int), np.zeros(0, int), 300.0)
     assert len(empty.distance_m) == 0
     assert len(empty.table.state) == 0
+
+
+@FIXTURE_OK
+@given(data=st.data())
+def test_custom_costs_find_the_keys_of_a_plain_edge_dijkstra(
+    restricted_net: roadnets.RoadNetwork, data: st.DataObject
+) -> None:
+    # a fastest route with a penalty on some turns, as the simulator wants one
+    a, turns = restricted_net.arrays, restricted_net.turns
+    source = data.draw(ANY_EDGE) % a.n_edges
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**32 - 1)))
+    edge_cost = a.edge_length_m / a.edge_speed_mps
+    turn_cost = rng.choice([0.0, 0.0, 5.0], size=len(turns.trans_to))
+    expected = _reference(a, turns, source, 120.0, 30.0, edge_cost, turn_cost)
+    table = restricted_net.route_table(
+        np.array([source]), 120.0, uturn_cost_m=30.0, edge_cost=edge_cost, turn_cost=turn_cost
+    )
+    assert table.weighted
+    got: dict[int, float] = {}
+    for rec in range(len(table.state)):
+        chain = [rec]
+        while table.pred[chain[-1]] >= 0:
+            chain.append(int(table.pred[chain[-1]]))
+        states = [source, *(int(table.state[r]) for r in reversed(chain))]
+        key = 0.0
+        for s, t in itertools.pairwise(states):
+            lo, hi = int(turns.trans_ptr[s]), int(turns.trans_ptr[s + 1])
+            k = lo + int(np.flatnonzero(turns.trans_to[lo:hi] == t)[0])
+            key += turn_cost[k] + (
+                30.0 if a.edge_twin[turns.state_edge[s]] == turns.state_edge[t] else 0.0
+            )
+        key += float(edge_cost[turns.state_edge[states[1:-1]]].sum())
+        got.setdefault(int(turns.state_edge[table.state[rec]]), key)
+    assert sorted(got) == sorted(expected)
+    assert np.allclose([got[e] for e in sorted(got)], [expected[e] for e in sorted(got)])
+
+
+def test_bad_costs_are_named(oakland_net: roadnets.RoadNetwork) -> None:
+    n = oakland_net.arrays.n_edges
+    with pytest.raises(ValueError, match=rf"edge_cost has shape \(3,\); .* shape \({n},\)"):
+        oakland_net.route_table(np.array([0]), 100.0, edge_cost=np.ones(3))
+    bad = np.ones(len(oakland_net.turns.trans_to))
+    bad[4] = np.nan
+    with pytest.raises(ValueError, match=r"turn_cost\[4\] = nan"):
+        oakland_net.route_table(np.array([0]), 100.0, turn_cost=bad)
