@@ -437,6 +437,11 @@ class DistanceCheckOut(BaseModel):
     verdict: Literal["pass", "over", "under", "incomplete"] = Field(
         description="pass inside the band; over/under outside; incomplete with breaks or gaps."
     )
+    evidence: Literal["positions", "heading", "odometer"] = Field(
+        description="What the matched length rests on, the strongest of: positions only, the "
+        "heading at speed, the odometer between fixes."
+    )
+    uturns: int = Field(description="U-turns on the matched path.")
 
 
 class StatsOut(BaseModel):

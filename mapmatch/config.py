@@ -77,6 +77,7 @@ class MatchConfig:
     max_candidates: int = 16
     candidate_margin: float = 10.0
     sigma_m: float = 5.0
+    estimate_sigma: bool = True
     max_emission_penalty: float = 8.0
     heading_sigma_deg: float = 25.0
     heading_min_speed_mps: float = 1.0
@@ -93,14 +94,20 @@ class MatchConfig:
     standstill_m: float = 10.0
     standstill_sigmas: float = 4.0
     uturn_penalty: float = 6.0
+    uturn_evidence_penalty: float = 3.0
+    loop_penalty: float = 6.0
     use_travel: bool = True
     travel_tolerance_m: float = 5.0
     travel_tolerance_frac: float = 0.15
     travel_tolerance_mps: float = 0.5
     travel_beta_m: float = 2.0
+    travel_accel_mps2: float = 3.0
+    nominal_speed_mps: float = 10.0
     thinning_sigmas: float = 2.0
     outlier_sigmas: float = 5.0
     outlier_max_gap_s: float = 5.0
+    outlier_chord_ratio: float = 0.6
+    outlier_max_run: int = 3
     max_break_repairs: int = 8
     min_log_transition: float = -50.0
     distance_band: tuple[float, float] = (-0.04, 0.01)
@@ -118,6 +125,7 @@ class MatchConfig:
             "travel_beta_m",
             "speed_factor",
             "speed_sigma_mps",
+            "nominal_speed_mps",
         )
         non_negative = (
             "max_emission_penalty",
@@ -131,12 +139,16 @@ class MatchConfig:
             "standstill_m",
             "standstill_sigmas",
             "uturn_penalty",
+            "uturn_evidence_penalty",
+            "loop_penalty",
             "travel_tolerance_m",
             "travel_tolerance_frac",
             "travel_tolerance_mps",
             "thinning_sigmas",
             "outlier_sigmas",
             "outlier_max_gap_s",
+            "outlier_chord_ratio",
+            "travel_accel_mps2",
         )
         for name in positive:
             _check(name, getattr(self, name), lambda v: v > 0, "must be > 0")

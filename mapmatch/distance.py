@@ -15,6 +15,7 @@ __all__ = ["DistanceCheck", "check_distance", "chord_length_m"]
 FloatArray = npt.NDArray[np.float64]
 Verdict = Literal["pass", "over", "under", "incomplete"]
 Source = Literal["odometer", "caller", "chord"]
+Evidence = Literal["positions", "heading", "odometer"]
 
 _log = logging.getLogger("mapmatch")
 
@@ -41,6 +42,15 @@ class DistanceCheck:
     verdict
         ``pass`` inside the band, ``over``/``under`` outside it, ``incomplete`` when breaks
         or unmatched fixes leave part of the road distance unknown.
+    evidence
+        What the matched length rests on, the strongest of: ``positions`` only (the
+        weakest: a route between fixes, chosen by distance), ``heading`` (the reported
+        heading at speed told directions and U-turns apart), ``odometer`` (the travelled
+        distance between fixes ruled out loops and detours). A verdict on a length that
+        rests on positions alone deserves less trust.
+    uturns
+        U-turns on the matched path: each one is driven distance that only a U-turn
+        explains, so a verdict that hangs on one is worth a look.
     """
 
     matched_length_m: float
@@ -49,6 +59,8 @@ class DistanceCheck:
     relative_error: float
     band: tuple[float, float]
     verdict: Verdict
+    evidence: Evidence = "positions"
+    uturns: int = 0
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready members (NaN becomes ``None``)."""
@@ -80,6 +92,8 @@ def check_distance(
     odometer_m: FloatArray | None,
     fused_distance_m: float | None,
     chord_m: float,
+    evidence: Evidence = "positions",
+    uturns: int = 0,
 ) -> DistanceCheck:
     """
     Compare the fused trip distance with the matched length and give a verdict.
@@ -124,4 +138,4 @@ def check_distance(
             "n/a" if math.isnan(relative) else f"{relative:+.2%}",
             verdict,
         )
-    return DistanceCheck(matched_length_m, fused, source, relative, band, verdict)
+    return DistanceCheck(matched_length_m, fused, source, relative, band, verdict, evidence, uturns)

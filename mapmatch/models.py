@@ -18,6 +18,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "ROUTE_SAME_EDGE",
+    "ROUTE_STANDSTILL",
     "ROUTE_UTURN",
     "ROUTE_UTURN_AT_NODE",
     "ROUTE_VIA_GRAPH",
@@ -29,15 +30,19 @@ __all__ = [
     "log_transition",
     "route_search_bounds",
     "routes_between",
+    "standstill_distances",
+    "uturn_penalties",
     "uturn_routes",
 ]
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
-#: How a transition's route runs: along one edge, through the graph, a U-turn mid-road, or
-#: through the graph with a U-turn at a node (scored as a U-turn, assembled as a graph route).
-ROUTE_SAME_EDGE, ROUTE_VIA_GRAPH, ROUTE_UTURN, ROUTE_UTURN_AT_NODE = 0, 1, 2, 3
+#: How a transition's route runs: forward along one edge, through the graph, a U-turn
+#: mid-road, through the graph with a U-turn at a node (scored as a U-turn, assembled as a
+#: graph route), or not at all: the next fix lies a little behind, which is noise around a
+#: slow or stopped car, so the car holds its position (:func:`standstill_distances`).
+ROUTE_SAME_EDGE, ROUTE_VIA_GRAPH, ROUTE_UTURN, ROUTE_UTURN_AT_NODE, ROUTE_STANDSTILL = 0, 1, 2, 3, 4
 
 
 def log_emission(distance_m: FloatArray, *, sigma_m: FloatArray | float) -> FloatArray:
@@ -144,19 +149,16 @@ def routes_between(
     cands: Candidates,
     pairs: CandidatePairs,
     table: PathTable,
-    config: MatchConfig,
-    cands_sigma_m: FloatArray,
 ) -> tuple[FloatArray, FloatArray, IntArray]:
     """
-    Route distance, free-flow time and route kind of every candidate pair.
+    Route distance, free-flow time and route kind of every candidate pair, driving forward.
 
     The route runs along the directed graph from candidate ``a``'s position to ``b``'s:
-    forward along one edge when both are on it (a move back by at most
-    ``max(standstill_m, standstill_sigmas * sigma)`` is noise around a slow or stopped car
-    and counts as 0 m; ``cands_sigma_m`` is the position sigma of each candidate's fix);
-    otherwise to the end of ``a``'s edge, through the graph to the start of ``b``'s edge, and
-    along it. When ``b`` is on the reverse twin of ``a``'s edge, a U-turn in place is an
-    alternative scored separately (:func:`uturn_routes`). Unreachable pairs get ``inf``.
+    forward along one edge when both are on it and ``b`` is ahead; otherwise to the end of
+    ``a``'s edge, through the graph to the start of ``b``'s edge, and along it. Moves that
+    hold the car still (``b`` a little behind ``a``) and U-turns in the middle of a road are
+    alternatives scored separately (:func:`standstill_distances`, :func:`uturn_routes`).
+    Unreachable pairs get ``inf``.
 
     Returns
     -------
@@ -180,16 +182,42 @@ def routes_between(
     back_last = (last >= 0) & (last == twin_b)
     kind[(eb == twin_a) | back_first | back_last] = ROUTE_UTURN_AT_NODE
 
-    sigma = np.maximum(cands_sigma_m[pairs.a], cands_sigma_m[pairs.b])
-    tolerance = np.maximum(config.standstill_m, config.standstill_sigmas * sigma)
-    same = (ea == eb) & (ob >= oa - tolerance)
-    along = np.maximum(ob - oa, 0.0)
-    use_same = same & (along <= route)
-    route = np.where(use_same, along, route)
-    time = np.where(use_same, along / speed_a, time)
-    kind[use_same] = ROUTE_SAME_EDGE
-
+    ahead = (ea == eb) & (ob >= oa)
+    route = np.where(ahead, ob - oa, route)
+    time = np.where(ahead, (ob - oa) / speed_a, time)
+    kind[ahead] = ROUTE_SAME_EDGE
     return route, time, kind
+
+
+def standstill_distances(
+    net: RoadNetwork,
+    cands: Candidates,
+    pairs: CandidatePairs,
+    table: PathTable,
+    tolerance_m: FloatArray,
+) -> FloatArray:
+    """
+    How far behind ``a`` each candidate ``b`` lies along the road, where that is noise.
+
+    ``b`` is behind ``a`` when driving forward from ``b`` reaches ``a`` (on the same edge,
+    or across edges: the end of ``b``'s edge, through the graph, the start of ``a``'s edge).
+    Within ``tolerance_m`` of ``a`` such a move is a slow or stopped car's fix scattering
+    backwards: the car holds its position instead of driving round a block or a roundabout
+    to explain it. ``inf`` where ``b`` is not that close behind.
+
+    Examples
+    --------
+    >>> # 30 m along an edge, the next fix 8 m back on it, tolerance 20 m
+    >>> float(np.where(30.0 - 22.0 <= 20.0, 30.0 - 22.0, np.inf))
+    8.0
+    """
+    arrays = net.arrays
+    ea, eb = cands.edge[pairs.a], cands.edge[pairs.b]
+    oa, ob = cands.offset_m[pairs.a], cands.offset_m[pairs.b]
+    mid_m = table.lookup(arrays.edge_v[eb], arrays.edge_u[ea])[0]
+    back = (arrays.edge_length_m[eb] - ob) + mid_m + oa
+    back = np.where((ea == eb) & (ob <= oa), oa - ob, back)
+    return np.where(back <= tolerance_m, back, np.inf)
 
 
 def uturn_routes(net: RoadNetwork, cands: Candidates, pairs: CandidatePairs) -> FloatArray:
@@ -221,6 +249,7 @@ def log_transition(
     sigma_m: FloatArray,
     config: MatchConfig,
     travel: tuple[FloatArray, FloatArray] | None = None,
+    uturn_penalty: FloatArray | float | None = None,
 ) -> FloatArray:
     """
     Log-likelihood of moving between two candidates of consecutive fixes.
@@ -243,10 +272,15 @@ def log_transition(
     ...                np.array([1]), np.array([1.0]), np.array([5.0]), MatchConfig())
     array([-0.90909091])
     """
-    beta = config.beta_m + config.beta_per_s * dt_s + config.beta_per_sigma * sigma_m
-    with np.errstate(invalid="ignore"):
+    # a step without a usable time (none known, or a repeated one) is a distance-only step:
+    # no speed term, and the interval that widens beta is the one a car at the nominal speed
+    # would need for the step
+    timed = np.isfinite(dt_s) & (dt_s > 0)
+    interval_s = np.where(timed, dt_s, great_circle_m / config.nominal_speed_mps)
+    beta = config.beta_m + config.beta_per_s * interval_s + config.beta_per_sigma * sigma_m
+    with np.errstate(invalid="ignore", divide="ignore"):
         score = -np.abs(great_circle_m - route_m) / beta
-        needed = np.maximum(route_m - 2.0 * sigma_m, 0.0) / dt_s
+        needed = np.where(timed, np.maximum(route_m - 2.0 * sigma_m, 0.0) / dt_s, np.nan)
         limit = np.where(time_s > 0, route_m / time_s, np.inf)
         allowed = config.speed_factor * limit + config.speed_margin_mps
         excess = np.maximum(needed - allowed, 0.0)
@@ -258,5 +292,33 @@ def log_transition(
             off = np.maximum(np.abs(route_m - travel_m) - tolerance, 0.0)
         score = score - np.nan_to_num(off, nan=0.0) / config.travel_beta_m
     uturn = (kind == ROUTE_UTURN) | (kind == ROUTE_UTURN_AT_NODE)
-    score = np.where(uturn, score - config.uturn_penalty, score)
+    penalty = config.uturn_penalty if uturn_penalty is None else uturn_penalty
+    score = np.where(uturn, score - penalty, score)
     return np.where(np.isfinite(route_m), score, -np.inf)
+
+
+def uturn_penalties(
+    heading_a: FloatArray, heading_b: FloatArray, weight: FloatArray, config: MatchConfig
+) -> FloatArray:
+    """
+    What a U-turn between two fixes costs, given the evidence their headings give.
+
+    Turning round needs evidence: without it a U-turn costs ``uturn_penalty``, so noise
+    that a small backward move explains is never taken for one. Headings that point more
+    than 120 degrees apart, at speeds where headings count (``weight``, the smaller of the
+    two fixes' heading weights), lower the cost towards ``uturn_evidence_penalty``.
+
+    Examples
+    --------
+    >>> from mapmatch.config import MatchConfig
+    >>> cfg = MatchConfig()
+    >>> p = uturn_penalties(np.array([0.0, 0.0]), np.array([180.0, 10.0]), np.ones(2), cfg)
+    >>> bool(p[0] == cfg.uturn_evidence_penalty), bool(p[1] == cfg.uturn_penalty)
+    (True, True)
+    """
+    diff = np.abs((heading_a - heading_b + 180.0) % 360.0 - 180.0)
+    evidence = np.where(diff > 120.0, np.nan_to_num(weight, nan=0.0), 0.0)
+    return np.asarray(
+        config.uturn_penalty + evidence * (config.uturn_evidence_penalty - config.uturn_penalty),
+        dtype=np.float64,
+    )

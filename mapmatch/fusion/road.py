@@ -113,7 +113,7 @@ def road_feedback_from_match(
     Turn a match result's snapped points into road pseudo-measurements for :func:`fuse`.
 
     A fix gives one entry when it was matched (not an outlier; fixes the matcher left out of
-    its model and placed on the path by time count when ``use_interpolated``) with
+    its model and placed on the path afterwards count when ``use_interpolated``) with
     ``confidence >= min_confidence``, lies on a straight stretch
     (the road turns by at most ``max_bend_deg`` within ``straight_window_m`` on either side)
     and at least ``junction_m`` from either end of its edge (where the next edge of the path
@@ -138,9 +138,8 @@ def road_feedback_from_match(
     min_confidence
         Minimum posterior probability of the chosen candidate.
     use_interpolated
-        Also use fixes the matcher thinned out of its model (it keeps fixes about two
-        accuracies apart, so during a GNSS outage, when the fused accuracy grows, most fixes
-        are thinned) at their time-interpolated place on the matched path. Their along-road
+        Also use fixes the matcher left out of its model (strays of a stopped car, fixes
+        dropped to join a break) at their place on the matched path. Their along-road
         position is rough, but the road's position across and its direction are right.
     cross_sigma_m
         1-sigma cross-road error of a snapped position (lane offset), metres.

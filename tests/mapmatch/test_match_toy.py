@@ -194,4 +194,8 @@ def test_geojson_follows_the_output_schema(dual_carriageway: roadnets.RoadNetwor
         "relative_error",
         "band",
         "verdict",
+        "evidence",
+        "uturns",
     }
+    assert check["evidence"] == "heading"  # the drive reports its heading
+    assert check["uturns"] == 0

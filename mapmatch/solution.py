@@ -1,0 +1,44 @@
+"""The HMM solved over a trace: the model's fixes, candidates, chosen states and scores."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from mapmatch.candidates import Candidates
+    from roadnets import PathTable
+
+__all__ = ["Solution"]
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+@dataclass(frozen=True, slots=True)
+class Solution:
+    """
+    The HMM solved over a subset of fixes (``used``, indices into the trace).
+
+    ``states`` is the chosen candidate rank of each used fix (-1: none); ``pieces`` are
+    ``(start, stop)`` ranges of *used* positions; ``kinds`` the route kind of every padded
+    transition; ``table`` the shortest paths the transitions were routed on.
+    """
+
+    used: IntArray
+    cands: Candidates
+    states: IntArray
+    pieces: list[tuple[int, int]]
+    post: FloatArray
+    kinds: IntArray
+    table: PathTable
+    log_emission: FloatArray
+    log_transition: FloatArray
+
+    @property
+    def breaks(self) -> list[int]:
+        """Used positions where a new piece starts."""
+        return [start for start, _ in self.pieces[1:]]
