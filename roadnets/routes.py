@@ -203,6 +203,10 @@ class EdgeRoutes:
         Each pair's record in :attr:`table` (-1 where there is no route).
     table
         The searches' records, for the routes' edges.
+    targets
+        The searches' targets: ``(ptr, edge, record)``, the distinct target edges of
+        ``table.sources[i]`` at ``ptr[i]:ptr[i + 1]`` and their records (``None`` when a
+        precomputed table answered).
     """
 
     from_edge: IntArray
@@ -212,7 +216,7 @@ class EdgeRoutes:
     uturns: IntArray
     record: IntArray
     table: RouteTable = field(repr=False)
-    _keys: list[IntArray] = field(default_factory=list, init=False, repr=False, compare=False)
+    targets: tuple[IntArray, IntArray, IntArray] | None = field(default=None, repr=False)
 
     def edges(self, from_edge: int, to_edge: int) -> list[int]:
         """
@@ -223,16 +227,19 @@ class EdgeRoutes:
         KeyError
             The pair was not asked for, or has no route.
         """
-        if not self._keys:  # sorted pair keys, built on first use
-            keys = self.from_edge * self.table.turns.n_edges + self.to_edge
-            order = np.argsort(keys, kind="stable")
-            self._keys.extend((keys[order], order))
-        keys, order = self._keys[0], self._keys[1]  # (two threads may both have built it)
-        wanted = from_edge * self.table.turns.n_edges + to_edge
-        i = int(np.searchsorted(keys, wanted))
-        if i == len(keys) or keys[i] != wanted or self.record[order[i]] < 0:
+        if self.targets is None:  # answered by a complete table: look the pair up there
+            rec = int(self.table.records(np.array([from_edge]), np.array([to_edge]))[0])
+        else:  # the searches' own targets, grouped by source
+            ptr, edge, records = self.targets
+            rank = int(np.searchsorted(self.table.sources, from_edge))
+            if rank == len(self.table.sources) or self.table.sources[rank] != from_edge:
+                raise KeyError((from_edge, to_edge))
+            lo, hi = int(ptr[rank]), int(ptr[rank + 1])
+            hit = np.flatnonzero(edge[lo:hi] == to_edge)
+            rec = int(records[lo + hit[0]]) if len(hit) else -1
+        if rec < 0:
             raise KeyError((from_edge, to_edge))
-        return self.table.path(int(self.record[order[i]]))
+        return self.table.path(rec)
 
 
 def _gather(table: RouteTable, rec: IntArray) -> tuple[FloatArray, FloatArray, IntArray]:
@@ -427,4 +434,4 @@ def route_pairs(
     cost = (uturn_cost_m, edge_cost, turn_cost)
     found, target_rec = _search(arrays, turns, src, src_bound, cost, target_ptr, target_edge)
     rec = target_rec[pair_target]
-    return EdgeRoutes(a, b, *_gather(found, rec), rec, found)
+    return EdgeRoutes(a, b, *_gather(found, rec), rec, found, (target_ptr, target_edge, target_rec))
