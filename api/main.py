@@ -24,6 +24,7 @@ from fastapi.openapi.utils import get_openapi
 from fastapi.responses import Response
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from api.docs import add_docs
 from api.errors import HTTP_CODES, error_answer, error_body
 from api.logs import configure_logging
 from api.metrics import ServiceMetrics
@@ -101,10 +102,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         version="1",
         description=_DESCRIPTION,
         lifespan=lifespan,
-        docs_url="/docs",
+        docs_url=None,  # /docs and /redoc come from api.docs, with bundled offline files
         redoc_url=None,
         openapi_url="/openapi.json",
     )
+    add_docs(app, assets=settings.docs_assets)
     app.state.settings = settings
     app.state.networks = networks
     app.state.service = service

@@ -18,6 +18,8 @@ variable                        meaning
 ``MAPMATCH_MATCH_THREADS``      matches running at once in one worker process (4)
 ``MAPMATCH_MAX_QUEUED``         matches waiting for a thread before 503 ``overloaded`` (64)
 ``MAPMATCH_ACCESS_LOG``         one JSON line per request on stderr (true)
+``MAPMATCH_DOCS_ASSETS``        ``bundled``: ``/docs`` and ``/redoc`` load the packaged
+                                Swagger UI and ReDoc (offline); ``cdn``: FastAPI's CDN links
 ==============================  ==============================================================
 """
 
@@ -25,7 +27,7 @@ from __future__ import annotations
 
 import json
 import os
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
@@ -76,6 +78,10 @@ class Settings(BaseSettings):
         default=64, ge=0, description="Matches waiting for a thread before 503 overloaded."
     )
     access_log: bool = Field(default=True, description="Write one JSON line per request.")
+    docs_assets: Literal["bundled", "cdn"] = Field(
+        default="bundled",
+        description="Where /docs and /redoc get Swagger UI and ReDoc: packaged files or a CDN.",
+    )
 
     @field_validator("networks", mode="before")
     @classmethod
