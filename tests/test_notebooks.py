@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import html
+import re
 import sys
 from pathlib import Path
 
@@ -52,3 +54,18 @@ def test_notebook_runs_top_to_bottom(
         o for c in nb.cells if c.cell_type == "code" for o in c.outputs if o.output_type == "error"
     ]
     assert errors == []
+    # "no internet needed": every map shown carries Leaflet and links no CDN file
+    pages = [
+        o["data"]["text/html"]
+        for c in nb.cells
+        if c.cell_type == "code"
+        for o in c.outputs
+        if "text/html" in o.get("data", {}) and "leaflet" in o["data"]["text/html"].lower()
+    ]
+    draws_maps = any("match_map(" in c.source for c in nb.cells if c.cell_type == "code")
+    assert bool(pages) == draws_maps
+    for page in pages:
+        source = html.unescape(page)
+        assert re.findall(r"<script[^>]+src=", source) == []
+        assert re.findall(r"<link[^>]+stylesheet", source) == []
+        assert "L.map(" in source
