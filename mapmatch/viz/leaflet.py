@@ -150,11 +150,16 @@ def match_map(
     box = trace_box_m(result, net, margin_m=margin_m)
     sw_lon, sw_lat = net.unproject(np.array([box[0]]), np.array([box[1]]))
     ne_lon, ne_lat = net.unproject(np.array([box[2]]), np.array([box[3]]))
-    fmap = fl.Map(tiles=None, control_scale=True, prefer_canvas=True)
+    fmap = fl.Map(tiles=None, control_scale=True, prefer_canvas=True, zoom_snap=0.25)
     use_assets(fmap, assets)
     if tiles is not None:
         fl.TileLayer(tiles=tiles, attr=attribution, name="tiles", overlay=False).add_to(fmap)
-    fmap.fit_bounds([[float(sw_lat[0]), float(sw_lon[0])], [float(ne_lat[0]), float(ne_lon[0])]])
+    # the layer switcher (top right) and the legend (bottom right) take a column on the right
+    fmap.fit_bounds(
+        [[float(sw_lat[0]), float(sw_lon[0])], [float(ne_lat[0]), float(ne_lon[0])]],
+        padding_top_left=(10, 10),
+        padding_bottom_right=(200, 10),
+    )
     layers = {name: fl.FeatureGroup(name=name) for name in LAYER_NAMES}
 
     roads = [_line(line.lon, line.lat, line.label) for line in network_lines(net, box)]

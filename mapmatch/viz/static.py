@@ -9,13 +9,18 @@ import numpy as np
 
 from mapmatch.viz.data import (
     CONFIDENCE_COLOURS,
+    MARK_COLOURS,
     SEGMENT_COLOURS,
+    break_marks,
     candidate_table,
     confidence_colour,
+    direction_arrows,
     edge_line,
+    endpoints,
     matched_edge_lines,
     network_lines,
     trace_box_m,
+    trace_gaps,
 )
 
 if TYPE_CHECKING:
@@ -42,10 +47,11 @@ def match_figure(
     Draw a match as a static figure, the same layers as :func:`mapmatch.viz.match_map`.
 
     Artists carry labels so a legend (and a test) can find them: ``road network``,
-    ``matched path`` (one line collection per segment, ``matched path, segment <n>``),
-    ``raw points``, ``snapped points`` (coloured by confidence, with a colour bar),
-    ``breaks`` and, with ``candidates_of``, ``candidates``. Axes are lon/lat degrees with
-    the aspect set so that a metre is as long east-west as north-south.
+    ``matched path`` (one line collection per segment, ``matched path, segment <n>``, drawn
+    over the fixes), ``direction``, ``start``, ``end``, ``raw points``, ``snapped points``
+    (coloured by confidence, with a colour bar), ``gaps``, ``breaks`` and, with
+    ``candidates_of``, ``candidates``. Axes are lon/lat degrees with the aspect set so that
+    a metre is as long east-west as north-south.
 
     Parameters
     ----------
@@ -88,31 +94,45 @@ def match_figure(
     box = trace_box_m(result, net, margin_m=margin_m)
     roads = [np.column_stack((ln.lon, ln.lat)) for ln in network_lines(net, box)]
     ax.add_collection(
-        LineCollection(roads, colors="#bdbdbd", linewidths=2.0, label="road network", zorder=1)
+        LineCollection(
+            roads,
+            colors=MARK_COLOURS["road"],
+            linewidths=2.0,
+            alpha=0.6,
+            label="road network",
+            zorder=1,
+        )
     )
     for s, lines in enumerate(matched_edge_lines(result, net)):
         ax.add_collection(
             LineCollection(
                 [np.column_stack((ln.lon, ln.lat)) for ln in lines],
                 colors=SEGMENT_COLOURS[s % len(SEGMENT_COLOURS)],
-                linewidths=4.0,
-                alpha=0.75,
+                linewidths=3.0,
+                alpha=0.9,
                 label=f"matched path, segment {s}",
-                zorder=2,
+                zorder=6,
             )
         )
 
     p = result.points
     m = p.matched
     ax.scatter(
-        p.raw_lon[m], p.raw_lat[m], s=10, c="#000000", marker="o", label="raw points", zorder=4
+        p.raw_lon[m],
+        p.raw_lat[m],
+        s=6,
+        c=MARK_COLOURS["raw"],
+        marker="o",
+        linewidths=0,
+        label="raw points",
+        zorder=4,
     )
     if p.outlier.any():
         ax.scatter(
             p.raw_lon[p.outlier],
             p.raw_lat[p.outlier],
-            s=22,
-            c="#d7191c",
+            s=16,
+            c=MARK_COLOURS["outlier"],
             marker="o",
             label="raw points, outliers",
             zorder=4,
@@ -122,42 +142,94 @@ def match_figure(
             p.raw_lon[~m],
             p.raw_lat[~m],
             s=30,
-            c="#d7191c",
+            c=MARK_COLOURS["unmatched"],
             marker="x",
             label="raw points, not matched",
             zorder=4,
         )
     links = [[(p.raw_lon[i], p.raw_lat[i]), (p.lon[i], p.lat[i])] for i in np.flatnonzero(m)]
     ax.add_collection(
-        LineCollection(links, colors="#555555", linewidths=0.5, linestyles=":", zorder=3)
+        LineCollection(links, colors=MARK_COLOURS["link"], linewidths=0.5, linestyles=":", zorder=3)
     )
     cmap = LinearSegmentedColormap.from_list("confidence", list(CONFIDENCE_COLOURS))
     snapped = ax.scatter(
         p.lon[m],
         p.lat[m],
-        s=28,
+        s=22,
         c=p.confidence[m],
         cmap=cmap,
         vmin=0.0,
         vmax=1.0,
-        edgecolors="#333333",
+        edgecolors=MARK_COLOURS["snapped_edge"],
         linewidths=0.5,
         label="snapped points",
         zorder=5,
     )
     figure.colorbar(snapped, ax=ax, shrink=0.6, label="confidence")
 
-    if result.breaks:
-        b = np.asarray(result.breaks)
+    gaps = trace_gaps(result, net)
+    if gaps:
+        ax.add_collection(
+            LineCollection(
+                [np.column_stack((g.lon, g.lat)) for g in gaps],
+                colors=MARK_COLOURS["gap"],
+                linewidths=2.0,
+                linestyles=(0, (4, 3)),
+                label="gaps",
+                zorder=7,
+            )
+        )
+    marks = break_marks(result)
+    if marks:
+        joins = [
+            [(p.lon[b.previous], p.lat[b.previous]), (p.lon[b.start], p.lat[b.start])]
+            for b in marks
+            if b.previous >= 0
+        ]
+        ax.add_collection(
+            LineCollection(
+                joins, colors=MARK_COLOURS["break"], linewidths=2.0, linestyles="--", zorder=7
+            )
+        )
+        starts = np.array([b.start for b in marks])
         ax.scatter(
-            p.lon[b],
-            p.lat[b],
-            s=260,
+            p.lon[starts],
+            p.lat[starts],
+            s=200,
             facecolors="none",
-            edgecolors="#d7191c",
+            edgecolors=MARK_COLOURS["break"],
             linewidths=2.0,
             label="breaks",
-            zorder=6,
+            zorder=8,
+        )
+    # a triangle per arrow, turned to its bearing (marker angles are counter-clockwise)
+    for k, arrow in enumerate(direction_arrows(result, net)):
+        ax.scatter(
+            [arrow.lon],
+            [arrow.lat],
+            s=38,
+            c=SEGMENT_COLOURS[arrow.segment % len(SEGMENT_COLOURS)],
+            marker=(3, 0, round(-arrow.bearing_deg)),
+            edgecolors="#ffffff",
+            linewidths=0.8,
+            label="direction" if k == 0 else "_direction",
+            zorder=9,
+        )
+    (start_lon, start_lat, _), (end_lon, end_lat, _) = endpoints(result)
+    for lon, lat, kind, marker in (
+        (start_lon, start_lat, "start", "o"),
+        (end_lon, end_lat, "end", "s"),
+    ):
+        ax.scatter(
+            [lon],
+            [lat],
+            s=70,
+            c=MARK_COLOURS[kind],
+            marker=marker,
+            edgecolors="#ffffff",
+            linewidths=1.5,
+            label=kind,
+            zorder=10,
         )
 
     if candidates_of is not None:

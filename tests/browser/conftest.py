@@ -19,7 +19,6 @@ import contextlib
 import json
 import os
 import select
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -30,25 +29,14 @@ from typing import TYPE_CHECKING, Any
 
 import pytest
 
+from mapmatch.viz.browser import HEADLESS_FLAGS, OFFLINE_FLAG, find_chromium
+
 if TYPE_CHECKING:
     from collections.abc import Iterator
 
-#: Flags that work in a container as root without a display or GPU.
-FLAGS = (
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--disable-dev-shm-usage",
-    "--hide-scrollbars",
-    "--mute-audio",
-    # no DNS at all: a page that needs a CDN fails here even on an online machine
-    "--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1, EXCLUDE localhost",
-)
+#: Flags that work in a container as root without a display or GPU, and no DNS at all: a
+#: page that needs a CDN fails here even on an online machine.
+FLAGS = (*HEADLESS_FLAGS, OFFLINE_FLAG)
 COMMAND_TIMEOUT_S = 60.0
 
 #: Moves two inherited fds to 3 (commands in) and 4 (answers out), then runs the browser.
@@ -65,18 +53,6 @@ os.execv(sys.argv[3], sys.argv[3:])
 
 class BrowserError(RuntimeError):
     """The browser answered a command with an error, died, or did not answer in time."""
-
-
-def chromium_path() -> str | None:
-    """The Chromium binary to use: ``MAPMATCH_CHROMIUM``, else ``chromium`` on PATH."""
-    named = os.environ.get("MAPMATCH_CHROMIUM")
-    if named:
-        return named if Path(named).exists() else None
-    for name in ("chromium", "chromium-browser"):
-        found = shutil.which(name)
-        if found:
-            return found
-    return None
 
 
 class Browser:
@@ -333,10 +309,13 @@ class Page:
 @pytest.fixture(scope="session")
 def browser(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Browser]:
     """A headless Chromium for the session; the tests skip, saying why, when there is none."""
-    executable = chromium_path()
+    executable = find_chromium()
     if executable is None:
+        named = os.environ.get("MAPMATCH_CHROMIUM")
         pytest.skip(
-            "no Chromium: install Debian's package (apt-get install -y chromium; .ci/run "
+            f"MAPMATCH_CHROMIUM={named} is not a file"
+            if named
+            else "no Chromium: install Debian's package (apt-get install -y chromium; .ci/run "
             "does) or set MAPMATCH_CHROMIUM to a Chromium binary"
         )
     folder = tmp_path_factory.mktemp("chromium")

@@ -282,3 +282,34 @@ def test_hovering_an_unmatched_fix_shows_its_tooltip(
     assert shown is not None
     assert int(shown.group(1)) in range(SEA.start, SEA.stop)
     assert "not matched" in text
+
+
+def test_screenshot_writes_a_png_of_a_saved_map(
+    browser: Any,  # only for its skip when there is no Chromium
+    result: mapmatch.MatchResult,
+    net: roadnets.RoadNetwork,
+    saved: Callable[..., Path],
+    tmp_path: Path,
+) -> None:
+    from mapmatch.viz.browser import screenshot
+
+    out = screenshot(saved(result, net), tmp_path / "map.png", size=(640, 480))
+    header = out.read_bytes()[:24]
+    assert header[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (int.from_bytes(header[16:20], "big"), int.from_bytes(header[20:24], "big")) == (
+        640,
+        480,
+    )
+
+
+def test_screenshot_without_chromium_says_how_to_get_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from mapmatch.viz.browser import find_chromium, screenshot
+
+    monkeypatch.setenv("MAPMATCH_CHROMIUM", str(tmp_path / "no-such-chromium"))
+    assert find_chromium() is None
+    page = tmp_path / "page.html"
+    page.write_text("<html></html>")
+    with pytest.raises(FileNotFoundError, match="apt-get install -y chromium"):
+        screenshot(page, tmp_path / "out.png")

@@ -268,7 +268,12 @@ def test_figure_has_the_expected_artists(
         segments = {f"matched path, segment {s.index}" for s in viz_result.segments}
         assert len(segments) >= 2
         expected = {"road network", "raw points", "snapped points", "breaks", "candidates"}
+        expected |= {"start", "end", "direction"}
         assert expected | segments <= set(labels)
+        arrows = [c for c in ax.collections if c.get_label().endswith("direction")]
+        assert len(arrows) == len(viz.data.direction_arrows(viz_result, viz_net))
+        path_z = {labels[s].get_zorder() for s in segments}
+        assert min(path_z) > labels["snapped points"].get_zorder()  # the path over the fixes
         p = viz_result.points
         assert len(labels["snapped points"].get_offsets()) == int(p.matched.sum())
         colours = np.asarray(labels["snapped points"].get_array())
@@ -424,6 +429,12 @@ def test_gaps_mark_an_outage_with_times_and_a_long_step_without(
     assert gaps[0].seconds == pytest.approx(31.0)
     assert "31 s without a fix between fix 99 and fix 100" in gaps[0].label
     assert viz.data.trace_gaps(timed, viz_net, min_gap_s=40.0) == []
+    fig = viz.match_figure(timed, viz_net)
+    try:
+        drawn = [c for c in fig.axes[0].collections if c.get_label() == "gaps"]
+        assert [len(c.get_segments()) for c in drawn] == [1]
+    finally:
+        plt.close(fig)
     untimed = mapmatch.match(_untimed(one_hz), viz_net)
     gaps = viz.data.trace_gaps(untimed, viz_net)
     assert [g.before for g in gaps] == [99]
