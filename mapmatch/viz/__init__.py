@@ -1,8 +1,11 @@
 """
 Pictures of a match: an interactive map and a static figure, to see what the matcher did.
 
-Needs the ``viz`` extra (``pip install mapmatch[viz]``: folium and matplotlib); both are
-imported only when a drawing is made, so ``import mapmatch`` never loads them.
+Needs the ``viz`` extra (``pip install mapmatch[viz]``: folium, matplotlib and the bundled
+Leaflet files of ``xstatic-leaflet``); they are imported only when a drawing is made, so
+``import mapmatch`` never loads them. Maps carry Leaflet in the page and draw the network's own
+roads, so they work offline (``assets="cdn"`` links Leaflet from a CDN instead);
+:func:`mapmatch.viz.browser.screenshot` takes a PNG of a saved map with headless Chromium.
 
 >>> import roadnets, mapmatch, mapmatch.viz                      # doctest: +SKIP
 >>> net = roadnets.load()                                         # doctest: +SKIP
@@ -13,11 +16,13 @@ imported only when a drawing is made, so ``import mapmatch`` never loads them.
 
 from __future__ import annotations
 
+from mapmatch.viz.assets import ASSET_MODES
 from mapmatch.viz.data import CANDIDATE_COLUMNS, candidate_table, confidence_colour
 from mapmatch.viz.leaflet import LAYER_NAMES, match_map
 from mapmatch.viz.static import match_figure
 
 __all__ = [
+    "ASSET_MODES",
     "CANDIDATE_COLUMNS",
     "LAYER_NAMES",
     "candidate_table",
