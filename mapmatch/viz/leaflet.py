@@ -177,7 +177,7 @@ def match_map(
     )
     if candidates_of is not None:
         _add_candidates(fl, result, net, candidates_of, layers["candidates"])
-    _add_gaps(fl, result, net, min_gap_s, layers["gaps"])
+    gaps = _add_gaps(fl, result, net, min_gap_s, layers["gaps"])
     _add_breaks(fl, result, layers["breaks"])
     for arrow in direction_arrows(result, net, spacing_m=arrow_spacing_m):
         colour = SEGMENT_COLOURS[arrow.segment % len(SEGMENT_COLOURS)]
@@ -197,7 +197,7 @@ def match_map(
     for name in shown:
         layers[name].add_to(fmap)
     fl.LayerControl(collapsed=False).add_to(fmap)
-    _legend(result, candidates=candidates_of is not None).add_to(fmap)
+    _legend(result, candidates=candidates_of is not None, gaps=gaps > 0).add_to(fmap)
     _stacking({name: layers[name] for name in shown}).add_to(fmap)
     return cast("folium.Map", fmap)
 
@@ -330,11 +330,12 @@ def _add_points(folium: Any, result: MatchResult, layers: dict[str, Any]) -> Non
 
 def _add_gaps(
     folium: Any, result: MatchResult, net: RoadNetwork, min_gap_s: float | None, layer: Any
-) -> None:
+) -> int:
     gaps = trace_gaps(result, net, min_gap_s=min_gap_s)
     lines = [_line(g.lon, g.lat, g.label) for g in gaps]
     style = _stroke(MARK_COLOURS["gap"], 3, 0.9, dashArray="6 6")
     _geojson(folium, lines, style=style).add_to(layer)
+    return len(gaps)
 
 
 def _add_breaks(folium: Any, result: MatchResult, layer: Any) -> None:
@@ -498,7 +499,9 @@ def _swatch_gradient() -> str:
     )
 
 
-def _legend_entries(result: MatchResult, *, candidates: bool) -> list[tuple[str, str, str, str]]:
+def _legend_entries(
+    result: MatchResult, *, candidates: bool, gaps: bool
+) -> list[tuple[str, str, str, str]]:
     """``(layer, colour, swatch html, label)`` for every kind of mark the map shows."""
     p = result.points
     segments = max(1, len(result.segments))
@@ -531,9 +534,9 @@ def _legend_entries(result: MatchResult, *, candidates: bool) -> list[tuple[str,
             "snapped fix, confidence 0 → 1",
         )
     )
-    entries.append(
-        ("gaps", MARK_COLOURS["gap"], _swatch_line(MARK_COLOURS["gap"], "6 4", 3), "gap (outage)")
-    )
+    if gaps:
+        gap = _swatch_line(MARK_COLOURS["gap"], "6 4", 3)
+        entries.append(("gaps", MARK_COLOURS["gap"], gap, "gap (outage)"))
     if result.breaks:
         entries.append(
             ("breaks", MARK_COLOURS["break"], _swatch_ring(MARK_COLOURS["break"]), "break")
@@ -633,12 +636,14 @@ def _element(name: str, template: str, **attributes: Any) -> Any:
     return element
 
 
-def _legend(result: MatchResult, *, candidates: bool) -> Any:
+def _legend(result: MatchResult, *, candidates: bool, gaps: bool) -> Any:
     """The legend: one row per kind of mark shown, its swatch in the colour drawn."""
     rows = "".join(
         f'<div class="mm-legend-item" data-layer="{layer}" data-colour="{colour}">'
         f'<span class="mm-swatch">{swatch}</span><span>{html.escape(label)}</span></div>'
-        for layer, colour, swatch, label in _legend_entries(result, candidates=candidates)
+        for layer, colour, swatch, label in _legend_entries(
+            result, candidates=candidates, gaps=gaps
+        )
     )
     title = html.escape(str(result.trace_id))
     legend_html = f'<div class="mm-legend-title">{title}</div>{rows}'

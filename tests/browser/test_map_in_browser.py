@@ -21,7 +21,14 @@ import mapmatch
 import roadnets
 from mapmatch import viz
 from mapmatch.simulate import SimulationConfig, simulate_trip
-from mapmatch.viz.data import SEGMENT_COLOURS, direction_arrows, trace_gaps
+from mapmatch.viz.data import (
+    CONFIDENCE_COLOURS,
+    MARK_COLOURS,
+    SEGMENT_COLOURS,
+    confidence_colour,
+    direction_arrows,
+    trace_gaps,
+)
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -192,7 +199,14 @@ def _check_layers(
     assert summary["control"] == list(layers)
     assert summary["legend"]
     for entry in summary["legend"]:
+        if entry["layer"] == "snapped points":  # a scale: its ends are the scale's ends
+            assert entry["colour"] == CONFIDENCE_COLOURS[-1]
+            continue
         assert entry["colour"] in layers[entry["layer"]]["colours"], entry
+    # snapped points are drawn in the colour of their confidence, and only those colours
+    confidence = {confidence_colour(float(c)) for c in p.confidence[p.matched]}
+    other = {MARK_COLOURS["link"], MARK_COLOURS["snapped_edge"]}
+    assert set(layers["snapped points"]["colours"]) == confidence | other
     labels = " ".join(e["label"] for e in summary["legend"])
     assert "fix not matched" in labels
     assert "gap" in labels

@@ -150,6 +150,7 @@ def test_map_legend_names_each_mark_in_its_colour(
     legend = re.findall(r'data-layer=\\"([^"\\]+)\\" data-colour=\\"(#[0-9a-f]{6})\\"', html)
     assert ("raw points", MARK_COLOURS["unmatched"]) in legend
     assert ("breaks", MARK_COLOURS["break"]) in legend
+    assert "gaps" not in {layer for layer, _ in legend}  # a trace without gaps
     for s in range(len(viz_result.segments)):
         assert ("matched path", SEGMENT_COLOURS[s]) in legend
     assert {layer for layer, _ in legend} <= set(viz.LAYER_NAMES)
