@@ -1,9 +1,11 @@
 """Shared driver for the peer runners (standard library only: it runs in every peer's venv).
 
 A runner is started as ``PYTHON run_<peer>.py JOB.json``. The job file holds
-``{"extract", "traces_csv", "params", "out"}`` and optionally ``"repeats"`` (default 1); the
-runner loads the network once (timed as ``load_s``), matches the first trace once as a warm-up
-(not timed), then matches every trace ``repeats`` times over, timing only the matching calls;
+``{"extract", "traces_csv", "params", "out"}`` and optionally ``"repeats"`` (default 1) and
+``"min_time_s"`` (default 0); the runner loads the network once (timed as ``load_s``), matches
+the first trace once as a warm-up (not timed), then matches every trace ``repeats`` times over,
+and more passes while the passes so far add up to less than ``min_time_s`` (a set that takes
+20 ms per pass is measured over enough passes to be stable), timing only the matching calls;
 ``match_s`` is the median over the passes of one pass's total (``match_s_runs`` lists them
 all; ``match_cpu_s`` is the same median of the process's CPU time, which other load on a shared
 machine inflates far less). It writes ``{"peer", "load_s", "match_s", "match_s_runs",
@@ -29,6 +31,7 @@ if TYPE_CHECKING:
     from collections.abc import Callable
 
 Geometry = list[list[list[float]]]
+_MAX_PASSES = 1000
 
 
 @dataclass(slots=True)
@@ -123,10 +126,12 @@ def run_peer(
         except Exception:
             traceback.print_exc()
     repeats = max(1, int(job.get("repeats", 1)))
+    min_time_s = float(job.get("min_time_s", 0.0))
     runs: list[float] = []
     cpu_runs: list[float] = []
     results: list[dict[str, Any]] = []
-    for k in range(repeats):
+    k = 0
+    while k < repeats or (sum(runs) < min_time_s and k < _MAX_PASSES):
         total = cpu = 0.0
         for tr, prepared in zip(traces, inputs, strict=True):
             t1, c1 = time.perf_counter(), time.process_time()
@@ -151,6 +156,7 @@ def run_peer(
                 results.append({"trace_id": tr.trace_id, "geometry": [], "error": error})
         runs.append(total)
         cpu_runs.append(cpu)
+        k += 1
     match_s = statistics.median(runs)
     out = {
         "peer": peer,
@@ -158,7 +164,7 @@ def run_peer(
         "match_s": match_s,
         "match_s_runs": runs,
         "match_cpu_s": statistics.median(cpu_runs),
-        "repeats": repeats,
+        "repeats": len(runs),
         "points": sum(len(t) for t in traces),
         "peak_rss_mb": peak_rss_mb(),
         "settings": settings(ctx) if settings else job.get("params", {}),

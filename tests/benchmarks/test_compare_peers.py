@@ -136,7 +136,8 @@ def test_quick_fills_only_what_was_not_given() -> None:
     assert a.extract == cp.QUICK["extract"]
     b = cp.parse_args([])
     assert b.extract == list(cp.DEFAULT_EXTRACTS)
-    assert (b.repeats, b.traces, b.sets) == (3, 20, cp.DEFAULT_SETS)
+    assert (b.repeats, b.min_time, b.traces, b.sets) == (3, 1.0, 20, cp.DEFAULT_SETS)
+    assert a.min_time == 0.0
 
 
 def test_json_is_strict() -> None:
