@@ -167,6 +167,7 @@ def _route_pieces(
     frontier: list[float],
     fixes_between: tuple[FloatArray, FloatArray, FloatArray],
     travel_m: float,
+    dt_s: float,
     hold_limit_m: float,
 ) -> list[list[float]]:
     """Edge stretches ``[edge, start, end]`` of the move from used fix ``t`` to ``t + 1``."""
@@ -188,12 +189,17 @@ def _route_pieces(
             turn = max(turn, frontier[2])
         turn = max(turn, _farthest_reached(net, ea, turn, *fixes_between))
         node = int(arrays.edge_v[ea])
+        to_end = (length - oa) + ob  # out to the end and back to b
+        timed_reach = float(arrays.edge_speed_mps[ea]) * dt_s  # NaN without times
         if np.isfinite(travel_m):  # out to the turn and back covers the distance travelled
             turn = max(turn, 0.5 * (travel_m + oa + length - ob))
-        elif arrays.out_ptr[node + 1] - arrays.out_ptr[node] <= 1 and (
-            length - turn <= 0.5 * hold_limit_m
+            timed_reach = np.nan  # the travel says where it turned
+        if arrays.out_ptr[node + 1] - arrays.out_ptr[node] <= 1 and (
+            length - turn <= 0.5 * hold_limit_m or to_end <= timed_reach
         ):
-            turn = length  # a dead end's end, closer than the fixes can tell: cars turn there
+            # a dead end is driven to its end, where there is room to turn, unless the
+            # time between the fixes is too short to get there and back at its speed limit
+            turn = length
         turn = min(turn, length)
         return [[ea, oa, turn], [eb, length - turn, ob]]
     via = solution.table.edges(int(arrays.edge_v[ea]), int(arrays.edge_u[eb]), arrays.edge_u)
@@ -297,11 +303,11 @@ def _piece_path(
     """Edges driven between the chosen candidates of used fixes ``start..stop-1``."""
     cands, states, used = solution.cands, solution.states, solution.used
     piece_obs = used[start:stop]
-    travel = (
-        obs.travel.between(piece_obs)[0]
-        if obs.travel is not None
-        else np.full(max(len(piece_obs) - 1, 0), np.nan)
-    )
+    travel = np.full(max(len(piece_obs) - 1, 0), np.nan)
+    if obs.travel is not None:  # only where it says something: an odometer, dense speeds
+        distance, slack = obs.travel.between(piece_obs)
+        with np.errstate(invalid="ignore"):
+            travel = np.where(slack <= 0.25 * distance, distance, np.nan)
     first = cands.ptr[start] + states[start]
     offset0 = float(cands.offset_m[first])
     entries: list[list[float]] = [[float(cands.edge[first]), offset0, offset0]]
@@ -317,6 +323,7 @@ def _piece_path(
             entries[-1],
             (x[between], y[between], radius_m[between]),
             float(travel[t - start]),
+            float(obs.time_s[used[t + 1]] - obs.time_s[used[t]]),
             hold_limit_m,
         )
         if pieces:

@@ -103,10 +103,11 @@ class MatchConfig:
     travel_beta_m: float = 2.0
     travel_accel_mps2: float = 3.0
     nominal_speed_mps: float = 10.0
+    max_speed_mps: float = 50.0
     thinning_sigmas: float = 2.0
     outlier_sigmas: float = 5.0
     outlier_max_gap_s: float = 5.0
-    outlier_chord_ratio: float = 0.6
+    outlier_detour_ratio: float = 2.0
     outlier_max_run: int = 3
     max_break_repairs: int = 8
     min_log_transition: float = -50.0
@@ -126,6 +127,7 @@ class MatchConfig:
             "speed_factor",
             "speed_sigma_mps",
             "nominal_speed_mps",
+            "max_speed_mps",
         )
         non_negative = (
             "max_emission_penalty",
@@ -147,7 +149,7 @@ class MatchConfig:
             "thinning_sigmas",
             "outlier_sigmas",
             "outlier_max_gap_s",
-            "outlier_chord_ratio",
+            "outlier_detour_ratio",
             "travel_accel_mps2",
         )
         for name in positive:

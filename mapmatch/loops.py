@@ -1,13 +1,14 @@
 """Loops and spurs in a matched path that the fixes do not support, taken out.
 
 The HMM is first order: it prices each move on its own, so it cannot see that three cheap
-moves in a row go round a 40 m roundabout, or that a drive out and back along a side street
-ends where it began. Scattered fixes around a stop near a small ring, or a burst of fixes
-pulled to one side, are explained that way. A loop (the path passes the same node twice) is
-a second-order event, and it is priced here, after Viterbi: the loop's fixes are scored once
-as driven (their chosen candidates and moves) and once as a car that held its place at the
-node where the loop starts (every fix's emission at that node, no moves), each with the moves
-into and out of the loop. A loop stays only when it explains the fixes better by at least
+moves in a row go round a 40 m roundabout, or that a drive back after a U-turn in the middle of
+a road, then forward again after a second one, ends where it began. Scattered fixes around a
+stop near a small ring, or a burst of fixes pulled to one side, are explained that way. A loop
+(the path passes the same node twice, or drives back from a U-turn to the place where it
+turned) is a second-order event, and it is priced here, after Viterbi: the loop's fixes are
+scored once as driven (their chosen candidates and moves) and once as a car that held its
+place where the loop starts (every fix's emission there, no moves), each with the moves into
+and out of the loop. A loop stays only when it explains the fixes better by at least
 ``loop_penalty`` nats; a car going round a block or into a dead end has fixes all along the
 loop, far from its start, and keeps it easily.
 """
@@ -53,17 +54,80 @@ def _node_visits(net: RoadNetwork, entries: list[list[float]]) -> list[tuple[int
     return unique
 
 
+def _turnback_returns(
+    net: RoadNetwork, entries: list[list[float]]
+) -> list[tuple[tuple[float, float], float, float]]:
+    """
+    Drives back from a U-turn in the middle of a road that return to where it turned.
+
+    For each mid-road U-turn (a stretch of edge ``e`` ending at ``X``, then its reverse twin)
+    the first later stretch of ``e`` that passes ``X`` again closes the excursion: its place
+    ``(x, y)``, the distance along the path of the turn and of the return to ``X``.
+    """
+    arrays = net.arrays
+    out: list[tuple[tuple[float, float], float, float]] = []
+    starts = np.concatenate(([0.0], np.cumsum([hi - lo for _, lo, hi in entries])))
+    for k in range(len(entries) - 1):
+        e, _, turn = entries[k]
+        nxt = int(entries[k + 1][0])
+        ek = int(e)
+        if arrays.edge_twin[ek] != nxt or turn >= arrays.edge_length_m[ek] - _EPS_M:
+            continue  # not a U-turn in the middle of the road
+        for m in range(k + 2, len(entries)):
+            em, lo, hi = entries[m]
+            if int(em) == ek and lo - _EPS_M <= turn <= hi + _EPS_M:
+                px, py = net.point_on_edge(np.array([ek]), np.array([turn]))
+                out.append(
+                    (
+                        (float(px[0]), float(py[0])),
+                        float(starts[k + 1]),
+                        float(starts[m] + turn - lo),
+                    )
+                )
+                break
+    return out
+
+
+def _free_uturns(net: RoadNetwork, entries: list[list[float]], s0: float, s1: float) -> int:
+    """U-turns the path makes between ``s0`` and ``s1`` along it, but at dead ends."""
+    arrays = net.arrays
+    count = 0
+    base = 0.0
+    for k in range(len(entries) - 1):
+        e, lo, hi = entries[k]
+        base += hi - lo
+        nxt = int(entries[k + 1][0])
+        if not (s0 - _EPS_M <= base <= s1 + _EPS_M) or arrays.edge_twin[int(e)] != nxt:
+            continue
+        node = int(arrays.edge_v[int(e)])
+        at_node = hi >= arrays.edge_length_m[int(e)] - _EPS_M
+        if not (at_node and arrays.out_ptr[node + 1] - arrays.out_ptr[node] <= 1):
+            count += 1
+    return count
+
+
 def _cut(entries: list[list[float]], s0: float, s1: float) -> list[list[float]]:
-    """The path without its stretch between ``s0`` and ``s1`` (both at stretch boundaries)."""
+    """The path without its stretch between ``s0`` and ``s1`` along it (cut mid-stretch too)."""
     kept: list[list[float]] = []
     base = 0.0
-    for entry in entries:
-        length = entry[2] - entry[1]
-        inside = base >= s0 - _EPS_M and base + length <= s1 + _EPS_M and length > 0
-        if not inside:
-            kept.append(entry)
-        base += length
-    return kept or entries[:1]
+    for edge, lo, hi in entries:
+        length = hi - lo
+        a, b = base, base + length  # this stretch's extent along the path
+        if b <= s0 + _EPS_M or a >= s1 - _EPS_M:
+            kept.append([edge, lo, hi])
+        else:
+            if a < s0 - _EPS_M:
+                kept.append([edge, lo, lo + (s0 - a)])
+            if b > s1 + _EPS_M:
+                kept.append([edge, lo + (s1 - a), hi])
+        base = b
+    merged: list[list[float]] = []
+    for entry in kept:  # the two ends of a cut on one edge join up again
+        if merged and int(merged[-1][0]) == int(entry[0]) and abs(merged[-1][2] - entry[1]) < 1e-3:
+            merged[-1][2] = entry[2]
+        else:
+            merged.append(entry)
+    return merged or entries[:1]
 
 
 def _loop_gain(
@@ -72,7 +136,8 @@ def _loop_gain(
     solution: Solution,
     start: int,
     along: FloatArray,
-    node: int,
+    entries: list[list[float]],
+    place: tuple[float, float],
     s0: float,
     s1: float,
     config: MatchConfig,
@@ -80,8 +145,10 @@ def _loop_gain(
     """Log-likelihood of the loop as driven minus that of holding at its node."""
     used, states = solution.used, solution.states
     inside = np.flatnonzero((along > s0 + _EPS_M) & (along < s1 - _EPS_M))
-    before = int(np.flatnonzero(along <= s0 + _EPS_M)[-1])
-    after = int(np.flatnonzero(along >= s1 - _EPS_M)[0])
+    ahead, behind = np.flatnonzero(along <= s0 + _EPS_M), np.flatnonzero(along >= s1 - _EPS_M)
+    if not len(ahead) or not len(behind) or behind[0] <= ahead[-1]:
+        return np.inf  # the loop is not between observations of the piece: keep it
+    before, after = int(ahead[-1]), int(behind[0])
     chain = np.arange(before, after + 1)  # positions in the piece, the loop's and its ends
     k = used[start + chain]
     step_m = np.hypot(np.diff(obs.x[k]), np.diff(obs.y[k]))
@@ -90,8 +157,7 @@ def _loop_gain(
     travel = None
     if obs.travel is not None:
         travel = obs.travel.between(k)
-    rows = start + chain
-    kinds = solution.kinds[rows[:-1], states[rows[:-1]], states[rows[1:]]]
+    kinds = np.full(len(chain) - 1, ROUTE_VIA_GRAPH)
     driven = np.diff(along[chain])
     no_time = np.full(len(driven), np.inf)  # no speed term: both alternatives alike
     as_driven = log_transition(step_m, driven, no_time, kinds, dt, sigma, config, travel)
@@ -103,13 +169,16 @@ def _loop_gain(
     held_kinds = np.full(len(driven), ROUTE_STANDSTILL)
     held_kinds[0] = held_kinds[-1] = ROUTE_VIA_GRAPH
     as_held = log_transition(step_m, held, no_time, held_kinds, dt, sigma, config, travel)
-    px, py = net.arrays.node_x[node], net.arrays.node_y[node]
+    px, py = place
     kk = used[start + inside]
     distance = np.hypot(obs.x[kk] - px, obs.y[kk] - py)
     em_held = log_emission(distance, sigma_m=obs.sigma_m[kk])
     if config.max_emission_penalty > 0:
         em_held = np.logaddexp(em_held, -config.max_emission_penalty)
-    driven_ll = float(np.sum(as_driven) + np.sum(em_driven))
+    # the loop's U-turns cost what they cost in Viterbi, but one at a dead end's end is no
+    # choice: the loop into a dead end is priced by loop_penalty alone
+    uturns = _free_uturns(net, entries, s0, s1)
+    driven_ll = float(np.sum(as_driven) + np.sum(em_driven)) - config.uturn_penalty * uturns
     held_ll = float(np.sum(as_held) + np.sum(em_held))
     return driven_ll - held_ll
 
@@ -133,17 +202,23 @@ def collapse_loops(
     """
     removed = 0
     along = along.copy()
+    arrays = net.arrays
     for _ in range(64):  # each pass takes out at most one loop
+        loops: list[tuple[tuple[float, float], float, float]] = []
         seen: dict[int, float] = {}
-        cut = None
         for node, at in _node_visits(net, entries):
             if node in seen and at > seen[node] + _EPS_M:
-                s0, s1 = seen[node], at
-                gain = _loop_gain(net, obs, solution, start, along, node, s0, s1, config)
-                if gain < config.loop_penalty:
-                    cut = (s0, s1)
-                    break
+                place = (float(arrays.node_x[node]), float(arrays.node_y[node]))
+                loops.append((place, seen[node], at))
             seen[node] = at
+        loops.extend(_turnback_returns(net, entries))
+        loops.sort(key=lambda loop: loop[2] - loop[1])  # innermost first
+        cut = None
+        for place, s0, s1 in loops:
+            gain = _loop_gain(net, obs, solution, start, along, entries, place, s0, s1, config)
+            if gain < config.loop_penalty:
+                cut = (s0, s1)
+                break
         if cut is None:
             break
         s0, s1 = cut

@@ -1,14 +1,15 @@
 """The HMM's observations: runs of fixes of a car that barely moved, merged into one.
 
-A stopped or crawling car reports many fixes scattered around one place. Each of them, taken
-on its own, looks like a small move, forwards or backwards, and the only routes that explain a
-backward move are a U-turn or a loop round a block or a roundabout. So, as Newson & Krumm
-thin a stopped car's fixes, consecutive fixes within ``thinning_sigmas`` x sigma of their
-running centroid become one observation at that centroid: a stop is one state, not many
-noisy ones. A fix that leaves the group and is followed by one that comes back is a stray
-(left out of the centroid, placed on the path afterwards). A moving car's fixes at 1 s
-merge in twos or threes, which smooths the noise without losing distance: the path still runs
-through every observation.
+A stopped or crawling car reports many fixes scattered around one place. Each of them, taken on
+its own, looks like a small move, forwards or backwards, and the only routes that explain a
+backward move are a U-turn or a loop round a block or a roundabout. So, as Newson & Krumm thin
+a stopped car's fixes, consecutive fixes within ``thinning_sigmas`` x sigma of their running
+centroid become one observation at that centroid: a stop is one state, not many noisy ones. A
+fix that leaves the group within seconds and is followed by one that comes back is a stray
+(left out of the centroid, placed on the path afterwards); at sparse sampling the same pattern
+is a car that drove somewhere and came back, and starts a group of its own. A moving car's
+fixes at 1 s merge in twos or threes, which smooths the noise without losing distance: the path
+still runs through every observation.
 """
 
 from __future__ import annotations
@@ -101,7 +102,7 @@ class Observations:
 
 
 @njit(cache=True, nogil=True)
-def _group_kernel(x, y, radius, solo):  # type: ignore[no-untyped-def]  # pragma: no cover
+def _group_kernel(x, y, radius, solo, quick):  # type: ignore[no-untyped-def]  # pragma: no cover
     n = len(x)
     group = np.empty(n, dtype=np.int64)
     stray = np.zeros(n, dtype=np.bool_)
@@ -119,12 +120,13 @@ def _group_kernel(x, y, radius, solo):  # type: ignore[no-untyped-def]  # pragma
             sy += y[i]
             count += 1.0
             group[i] = g
-        elif (
-            not solo[i + 1] and np.hypot(x[i + 1] - cx, y[i + 1] - cy) <= radius[i + 1]
-        ) or (
-            not solo[i + 1]
-            and not solo[i + 2]
-            and np.hypot(x[i + 2] - cx, y[i + 2] - cy) <= radius[i + 2]
+        elif quick[i] and (
+            (not solo[i + 1] and np.hypot(x[i + 1] - cx, y[i + 1] - cy) <= radius[i + 1])
+            or (
+                not solo[i + 1]
+                and not solo[i + 2]
+                and np.hypot(x[i + 2] - cx, y[i + 2] - cy) <= radius[i + 2]
+            )
         ):
             group[i] = g  # it left and one of the next two fixes is back: a stray here
             stray[i] = True
@@ -141,6 +143,7 @@ def group_fixes(
     sigma_m: FloatArray,
     config: MatchConfig,
     segment_starts: IntArray | None = None,
+    time_s: FloatArray | None = None,
 ) -> tuple[IntArray, BoolArray]:
     """
     Observation of each fix, and which fixes are strays of their observation.
@@ -168,8 +171,15 @@ def group_fixes(
         starts = np.asarray(segment_starts, dtype=np.int64)
         solo[starts] = solo[starts - 1] = True
     solo[n:] = True
+    # a stray is noise, seen between fixes close in time (an outlier, a multipath jump); at
+    # sparse sampling a fix that leaves and comes back is a car that drove somewhere and back
+    quick = np.ones(n + 2, dtype=bool)
+    if time_s is not None and n > 1:
+        dt = np.diff(np.asarray(time_s, dtype=np.float64))
+        longest = np.fmax(np.concatenate(([0.0], dt)), np.concatenate((dt, [0.0])))
+        quick[:n] = ~(longest > config.outlier_max_gap_s)  # NaN (no times): quick
     group, stray = _group_kernel(
-        np.asarray(x, np.float64), np.asarray(y, np.float64), radius, solo
+        np.asarray(x, np.float64), np.asarray(y, np.float64), radius, solo, quick
     )
     return np.asarray(group, dtype=np.int64), np.asarray(stray, dtype=bool)
 
@@ -202,7 +212,7 @@ def merge_fixes(
     centroid fixes (its place along the road), the unknown-step counts at its first and
     last fix.
     """
-    group, stray = group_fixes(x, y, sigma_m, config, segment_starts)
+    group, stray = group_fixes(x, y, sigma_m, config, segment_starts, time_s)
     n = len(x)
     count = int(group[-1]) + 1 if n else 0
     starts = np.flatnonzero(np.diff(group, prepend=-1) != 0)

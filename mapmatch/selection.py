@@ -27,17 +27,20 @@ def find_outliers(
     gap_s: FloatArray | None = None,
 ) -> BoolArray:
     """
-    Fixes far from where their neighbours put them.
+    Fixes that stick out from their neighbours: a spike, not a drive.
 
     For each fix with neighbours at most ``outlier_max_gap_s`` away on both sides (``gap_s``:
     the time from each point to the next, when points are groups of fixes; the time steps
-    otherwise), the
-    position interpolated in time between the neighbours is the prediction; a fix farther
-    than ``outlier_sigmas`` x its sigma from it, and worse predicted than both neighbours, is
-    an outlier. Over a few seconds a car moves nearly straight, so a good fix stays within
-    about 1.2 sigma of the prediction. A run of
-    displaced fixes is not caught here (its members predict each other); the matcher's break
-    repair handles those.
+    otherwise; without times every neighbour counts), the detour through it is how much
+    longer the way from the previous fix to the next is when it passes through this one. A
+    fix farther than ``outlier_sigmas`` x its sigma from its neighbours (on average), that
+    sticks out farther than they are apart (the way through it more than
+    ``outlier_detour_ratio`` times their distance: a turn of more than about 120 degrees),
+    and whose detour is the largest of its neighbours', is an outlier. A car turning a
+    corner between its neighbours makes a detour too, but a gentle one (a right angle is
+    1.41 times the chord), so sparse traces keep their corner fixes. A run of displaced
+    fixes is caught by calling again without the ones found, or by
+    :func:`find_off_road_runs`.
 
     The first and last fix have one neighbour only. When the trace says how far the car went
     (``travel``: distance and extra slack per step, as the transition model uses it), an end
@@ -55,25 +58,19 @@ def find_outliers(
     out = np.zeros(n, dtype=bool)
     if n < 3 or config.outlier_sigmas <= 0:
         return out
-    dt_before, dt_after = time_s[1:-1] - time_s[:-2], time_s[2:] - time_s[1:-1]
-    timed = np.isfinite(dt_before) & np.isfinite(dt_after) & (dt_before + dt_after > 0)
     gaps = np.diff(time_s) if gap_s is None else gap_s
     gap_before, gap_after = gaps[:-1], gaps[1:]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        w = np.where(timed, dt_before / (dt_before + dt_after), 0.5)
-    px = x[:-2] + w * (x[2:] - x[:-2])
-    py = y[:-2] + w * (y[2:] - y[:-2])
-    residual = np.hypot(x[1:-1] - px, y[1:-1] - py)
-    gap = config.outlier_max_gap_s
-    close = ~timed | ((gap_before <= gap) & (gap_after <= gap))
-    # a car turning a corner between its neighbours leaves their chord by up to half its
-    # length (a right angle); only a fix sticking out farther than that is a spike
-    chord = np.hypot(x[2:] - x[:-2], y[2:] - y[:-2])
-    limit = np.maximum(config.outlier_sigmas * sigma_m[1:-1], config.outlier_chord_ratio * chord)
-    # a good fix next to an outlier is predicted badly too; blame only the local worst
-    padded = np.concatenate(([0.0], residual, [0.0]))
-    worst = (residual >= padded[:-2]) & (residual >= padded[2:])
-    out[1:-1] = close & (residual > limit) & worst
+    close = ~(gap_before > config.outlier_max_gap_s) & ~(gap_after > config.outlier_max_gap_s)
+    d_prev = np.hypot(x[1:-1] - x[:-2], y[1:-1] - y[:-2])
+    d_next = np.hypot(x[2:] - x[1:-1], y[2:] - y[1:-1])
+    d_skip = np.hypot(x[2:] - x[:-2], y[2:] - y[:-2])
+    detour = d_prev + d_next - d_skip
+    sharp = d_prev + d_next > config.outlier_detour_ratio * d_skip
+    # a good fix next to an outlier makes a detour too; blame only the local worst
+    padded = np.concatenate(([0.0], detour, [0.0]))
+    worst = (detour >= padded[:-2]) & (detour >= padded[2:])
+    far = 0.5 * (d_prev + d_next) > config.outlier_sigmas * sigma_m[1:-1]
+    out[1:-1] = close & far & sharp & worst
     if travel is not None:
         travel_m, slack_m = travel
         for end, inner, step in ((0, 1, 0), (n - 1, n - 2, n - 2)):
