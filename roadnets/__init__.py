@@ -9,6 +9,7 @@ from roadnets.errors import (
     InvalidNetworkSourceError,
     MapMatchError,
     NetworkSourceNotFoundError,
+    NetworkTooWideError,
     NoDrivableRoadsError,
     RoadNetworkError,
 )
@@ -32,6 +33,7 @@ __all__ = [
     "NetworkArrays",
     "NetworkInfo",
     "NetworkSourceNotFoundError",
+    "NetworkTooWideError",
     "NoDrivableRoadsError",
     "PathTable",
     "RoadNetwork",

@@ -42,7 +42,7 @@ class NetworkArrays:
     edge_way_id
         OSM way id each edge comes from.
     edge_length_m
-        Length along the geometry, metres.
+        Length along the geometry, metres, measured on the WGS84 ellipsoid (geodesic).
     edge_speed_mps
         Speed limit (tagged ``maxspeed`` or the class default), metres per second.
     edge_class
@@ -56,7 +56,8 @@ class NetworkArrays:
     geom_x, geom_y
         Vertex positions, metres, in driving order for each edge.
     geom_cum_m
-        Distance along the edge from its start to each vertex, metres.
+        Distance along the edge from its start to each vertex, metres (geodesic: the sum of
+        the geodesic lengths of the segments before it).
     out_ptr, out_edge
         CSR adjacency: edges leaving node ``n`` are ``out_edge[out_ptr[n]:out_ptr[n + 1]]``.
     seg_start, seg_edge

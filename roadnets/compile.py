@@ -2,13 +2,15 @@
 
 Ways are split at every node shared with another way (or repeated within one) and at their
 ends, as osmnx's simplified graphs are; each piece becomes one directed edge per permitted
-direction.
+direction. Lengths along the geometry are geodesic (WGS84 ellipsoid), positions planar in the
+network's projection (see :mod:`roadnets.projection`).
 """
 
 from __future__ import annotations
 
 import itertools
 import logging
+import math
 from collections import defaultdict
 from typing import TYPE_CHECKING
 
@@ -16,7 +18,15 @@ import numpy as np
 
 from roadnets.arrays import NetworkArrays
 from roadnets.drivable import ROAD_CLASSES, direction_flags, road_speed_kph
-from roadnets.projection import Projector, utm_epsg
+from roadnets.errors import NetworkTooWideError
+from roadnets.projection import (
+    EARTH_RADIUS_M,
+    MAX_SCALE_ERROR,
+    Projector,
+    central_longitude,
+    geodesic_steps,
+    tm_scale_error,
+)
 
 if TYPE_CHECKING:
     from roadnets.osm_reader import OsmExtract, TurnRestriction
@@ -28,13 +38,37 @@ _log = logging.getLogger("roadnets")
 _CLASS_INDEX = {name: i for i, name in enumerate(ROAD_CLASSES)}
 
 
-def choose_projector(extract: OsmExtract) -> Projector:
-    """The UTM zone of the centre of the extract's drivable ways."""
+def choose_projector(extract: OsmExtract, source: str) -> Projector:
+    """
+    The transverse Mercator centred on the extract's drivable ways (see :mod:`roadnets.projection`).
+
+    Raises
+    ------
+    NetworkTooWideError
+        The ways reach so far east or west of their centre that the planar scale error would
+        pass :data:`~roadnets.projection.MAX_SCALE_ERROR`.
+    """
     lon = np.concatenate([way.lon for way in extract.ways])
     lat = np.concatenate([way.lat for way in extract.ways])
-    centre_lon = 0.5 * (float(lon.min()) + float(lon.max()))
-    centre_lat = 0.5 * (float(lat.min()) + float(lat.max()))
-    return Projector(utm_epsg(centre_lon, centre_lat))
+    centre_lon, west, east = central_longitude(lon)
+    south, north = float(lat.min()), float(lat.max())
+    error = tm_scale_error(lon, lat, centre_lon)
+    if error > MAX_SCALE_ERROR:
+        nearest_equator = 0.0 if south <= 0.0 <= north else min(abs(south), abs(north))
+        width_km = (
+            EARTH_RADIUS_M * math.radians(east - west) * math.cos(math.radians(nearest_equator))
+        )
+        half_m = EARTH_RADIUS_M * math.atanh(math.sqrt(1.0 - 1.0 / (1.0 + MAX_SCALE_ERROR) ** 2))
+        raise NetworkTooWideError(
+            source,
+            lon_range=(west, east),
+            lat_range=(south, north),
+            width_km=width_km / 1000.0,
+            scale_error=error,
+            limit=MAX_SCALE_ERROR,
+            max_width_km=2.0 * half_m / 1000.0,
+        )
+    return Projector.local(centre_lon, 0.5 * (south + north))
 
 
 def compile_network(extract: OsmExtract, projector: Projector) -> NetworkArrays:
@@ -50,9 +84,11 @@ def compile_network(extract: OsmExtract, projector: Projector) -> NetworkArrays:
     """
     ways = extract.ways
     all_ids = np.concatenate([way.node_ids for way in ways])
-    x_all, y_all = projector.forward(
-        np.concatenate([way.lon for way in ways]), np.concatenate([way.lat for way in ways])
-    )
+    lon_all = np.concatenate([way.lon for way in ways])
+    lat_all = np.concatenate([way.lat for way in ways])
+    x_all, y_all = projector.forward(lon_all, lat_all)
+    # geodesic length of the step from each vertex to the next (across two ways: unused)
+    step_all = np.append(geodesic_steps(lon_all, lat_all), 0.0)
     unique_ids, counts = np.unique(all_ids, return_counts=True)
     ends = np.concatenate([[way.node_ids[0], way.node_ids[-1]] for way in ways])
     is_graph_node = set(unique_ids[counts >= 2].tolist()) | set(ends.tolist())
@@ -60,11 +96,12 @@ def compile_network(extract: OsmExtract, projector: Projector) -> NetworkArrays:
     node_index: dict[int, int] = {}
     node_xy: list[tuple[float, float]] = []
     edges: list[tuple[int, int, int, float, int, bool, int]] = []  # u, v, way, speed, cls, ow, twin
-    geoms: list[tuple[np.ndarray, np.ndarray]] = []
+    geoms: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # x, y, geodesic steps
     start = 0
     for way in ways:
         n = len(way.node_ids)
         xs, ys = x_all[start : start + n], y_all[start : start + n]
+        steps = step_all[start : start + n - 1]
         start += n
         forward, backward = direction_flags(way.tags)
         speed_fwd = road_speed_kph(way.tags, forward=True) / 3.6
@@ -72,18 +109,18 @@ def compile_network(extract: OsmExtract, projector: Projector) -> NetworkArrays:
         cls = _CLASS_INDEX[way.tags["highway"]]
         cuts = [i for i, nid in enumerate(way.node_ids.tolist()) if nid in is_graph_node]
         for a, b in itertools.pairwise(cuts):
-            gx, gy = xs[a : b + 1], ys[a : b + 1]
+            gx, gy, gs = xs[a : b + 1], ys[a : b + 1], steps[a:b]
             u = _node(node_index, node_xy, int(way.node_ids[a]), float(gx[0]), float(gy[0]))
             v = _node(node_index, node_xy, int(way.node_ids[b]), float(gx[-1]), float(gy[-1]))
             oneway = not (forward and backward)
             first = len(edges)
             if forward:
                 edges.append((u, v, way.way_id, speed_fwd, cls, oneway, -1))
-                geoms.append((gx, gy))
+                geoms.append((gx, gy, gs))
             if backward:
                 twin = first if forward else -1
                 edges.append((v, u, way.way_id, speed_bwd, cls, oneway, twin))
-                geoms.append((gx[::-1], gy[::-1]))
+                geoms.append((gx[::-1], gy[::-1], gs[::-1]))
                 if forward:
                     edges[first] = (*edges[first][:6], first + 1)
     return _to_arrays(node_index, node_xy, edges, geoms, extract.restrictions)
@@ -103,7 +140,7 @@ def _to_arrays(
     node_index: dict[int, int],
     node_xy: list[tuple[float, float]],
     edges: list[tuple[int, int, int, float, int, bool, int]],
-    geoms: list[tuple[np.ndarray, np.ndarray]],
+    geoms: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
     restrictions: list[TurnRestriction],
 ) -> NetworkArrays:
     n_nodes, n_edges = len(node_xy), len(edges)
@@ -121,8 +158,11 @@ def _to_arrays(
     geom_ptr = np.concatenate(([0], np.cumsum(sizes)))
     geom_x = np.concatenate([g[0] for g in geoms]).astype(np.float64)
     geom_y = np.concatenate([g[1] for g in geoms]).astype(np.float64)
-    step = np.hypot(np.diff(geom_x), np.diff(geom_y))
-    step[geom_ptr[1:-1] - 1] = 0.0  # no step across two edges
+    # geodesic steps between consecutive vertices; none across two edges
+    step = np.zeros(max(len(geom_x) - 1, 0), dtype=np.float64)
+    inside = np.ones(len(step), dtype=bool)
+    inside[geom_ptr[1:-1] - 1] = False
+    step[inside] = np.concatenate([g[2] for g in geoms])
     cum = np.concatenate(([0.0], np.cumsum(step)))
     geom_cum = cum - np.repeat(cum[geom_ptr[:-1]], sizes)
     length = geom_cum[geom_ptr[1:] - 1].copy()

@@ -56,3 +56,31 @@ class CacheError(RoadNetworkError, OSError):
             "pass cache_dir= or set MAPMATCH_CACHE_DIR to a writable folder"
         )
         super().__init__(msg)
+
+
+class NetworkTooWideError(RoadNetworkError, ValueError):
+    """The network reaches too far east-west for one planar projection to keep distances true."""
+
+    def __init__(
+        self,
+        path: str,
+        *,
+        lon_range: tuple[float, float],
+        lat_range: tuple[float, float],
+        width_km: float,
+        scale_error: float,
+        limit: float,
+        max_width_km: float,
+    ) -> None:
+        self.path, self.lon_range, self.lat_range = path, lon_range, lat_range
+        self.width_km, self.scale_error = width_km, scale_error
+        error = "over 100 %" if scale_error > 1.0 else f"{scale_error:.2%}"
+        msg = (
+            f"road network source {path!r} spans longitudes {lon_range[0]:.4f}..{lon_range[1]:.4f} "
+            f"and latitudes {lat_range[0]:.4f}..{lat_range[1]:.4f} (about {width_km:,.0f} km "
+            f"east-west): too wide for one planar projection (its scale error would reach {error} "
+            f"at the network's east/west ends, more than {limit:.1%}); split the extract into "
+            f"parts at most {max_width_km:,.0f} km wide east-west (e.g. `osmium extract --bbox`) "
+            "and load each part"
+        )
+        super().__init__(msg)

@@ -4,7 +4,7 @@
 The graph goes through the same path as an OSM file (:func:`roadnets.compile.compile_network`
 with the drivable rules of :mod:`roadnets.drivable`): every edge of the graph becomes a "way"
 of its own, from ``u`` through its ``geometry`` to ``v``, so the compiled network has the
-graph's nodes and edges, projected to the UTM zone of its centre.
+graph's nodes and edges, projected as a loaded file is (:mod:`roadnets.projection`).
 
 How a graph is read
 -------------------
@@ -140,7 +140,7 @@ def from_graph(
     if not ways:
         raise NoDrivableRoadsError(where)
     extract = OsmExtract(ways, [], 0)
-    projector = choose_projector(extract)
+    projector = choose_projector(extract, where)
     arrays = compile_network(extract, projector)
     way_names: dict[int, str] = {}
     for way in ways:

@@ -115,7 +115,7 @@ def load(
                 source=str(path),
                 source_sha256=digest,
                 arrays=arrays,
-                projector=Projector(int(meta["epsg"])),
+                projector=Projector(str(meta["crs"])),
                 way_names=_read_way_names(entry),
                 clipped_ways=int(meta["clipped_ways"]),
                 from_cache=True,
@@ -125,7 +125,7 @@ def load(
     extract = read_osm(path)
     if not extract.ways:
         raise NoDrivableRoadsError(str(path))
-    projector = choose_projector(extract)
+    projector = choose_projector(extract, str(path))
     arrays = compile_network(extract, projector)
     way_names: dict[int, str] = {}
     for way in extract.ways:
@@ -137,7 +137,7 @@ def load(
         meta = {
             "source_name": path.name,
             "source_sha256": digest,
-            "epsg": projector.epsg,
+            "crs": projector.crs,
             "clipped_ways": extract.clipped_ways,
             "nodes": arrays.n_nodes,
             "edges": arrays.n_edges,

@@ -63,8 +63,9 @@ class RoadNetwork:
     Safe to share between threads: the R-tree (libspatialindex, not thread-safe itself) is
     queried under a lock; everything else is read-only arrays.
 
-    Build one with :func:`roadnets.load`. Metric work happens in :attr:`crs` (the UTM zone of
-    the network's centre); positions given to and returned from users are WGS84 lon/lat.
+    Build one with :func:`roadnets.load`. Planar work happens in :attr:`crs` (a transverse
+    Mercator centred on the network, see :mod:`roadnets.projection`); lengths and offsets along
+    edges are geodesic; positions given to and returned from users are WGS84 lon/lat.
     """
 
     network_id: str
@@ -83,7 +84,7 @@ class RoadNetwork:
 
     @property
     def crs(self) -> str:
-        """The projected CRS of the arrays, as ``EPSG:<code>``."""
+        """The projected CRS of the arrays (a PROJ string pyproj reads)."""
         return self.projector.crs
 
     @cached_property
@@ -350,12 +351,9 @@ class RoadNetwork:
 
     @cached_property
     def bbox(self) -> tuple[float, float, float, float]:
-        """``(min_lon, min_lat, max_lon, max_lat)`` of the road geometry."""
+        """``(min_lon, min_lat, max_lon, max_lat)`` of the road geometry (every vertex)."""
         a = self.arrays
-        lon, lat = self.unproject(
-            np.array([a.geom_x.min(), a.geom_x.max(), a.geom_x.min(), a.geom_x.max()]),
-            np.array([a.geom_y.min(), a.geom_y.min(), a.geom_y.max(), a.geom_y.max()]),
-        )
+        lon, lat = self.unproject(a.geom_x, a.geom_y)
         return float(lon.min()), float(lat.min()), float(lon.max()), float(lat.max())
 
     def info(self) -> NetworkInfo:

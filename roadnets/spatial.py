@@ -34,7 +34,9 @@ class EdgeHits:
     distance_m
         Distance from the point to its projection on the edge, metres.
     offset_m
-        Distance along the edge from its start to the projection, metres.
+        Distance along the edge from its start to the projection, metres (geodesic, as
+        ``edge_length_m``: the projection's planar fraction of its segment times the
+        segment's geodesic length).
     x, y
         The projection, metres in the network CRS.
     bearing_deg
@@ -194,9 +196,12 @@ def query_edges(
     dist = np.hypot(px - qx, py - qy)
     near = dist <= radius[point]
     point, seg, dist, t, qx, qy = point[near], seg[near], dist[near], t[near], qx[near], qy[near]
-    dx, dy, start, seg_len2 = dx[near], dy[near], start[near], seg_len2[near]
+    dx, dy, start = dx[near], dy[near], start[near]
     edge = arrays.seg_edge[seg].astype(np.int64)
-    offset = arrays.geom_cum_m[start] + t * np.sqrt(seg_len2)
+    # the planar fraction of the segment times its geodesic length: offsets along an edge
+    # add up to its (geodesic) length whatever the projection's scale there
+    cum = arrays.geom_cum_m
+    offset = cum[start] + t * (cum[start + 1] - cum[start])
 
     keep = _nearest_places(point, edge, offset, dist)
     point, edge, offset = point[keep], edge[keep], offset[keep]

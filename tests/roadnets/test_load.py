@@ -31,7 +31,9 @@ def _edges_of_way(net: roadnets.RoadNetwork, way_id: int) -> list[tuple[int, int
 def test_embedded_default_network_loads(default_net: roadnets.RoadNetwork) -> None:
     info = default_net.info()
     assert info.network_id == "monaco_2020"
-    assert info.crs == "EPSG:32632"
+    # a transverse Mercator centred on the roads (roadnets.projection)
+    assert info.crs.startswith("+proj=tmerc +lat_0=43.7382")
+    assert "+lon_0=7.4221" in info.crs
     assert (info.nodes, info.edges) == (857, 1453)
     assert 60 < info.road_km < 70
     lon0, lat0, lon1, lat1 = info.bbox
