@@ -85,7 +85,7 @@ class MatchConfig:
     heading_max_penalty: float = 12.0
     beta_m: float = 3.0
     beta_per_s: float = 0.3
-    beta_per_sigma: float = 0.0
+    beta_per_sigma: float = 0.3
     route_factor: float = 2.0
     route_slack_m: float = 300.0
     speed_factor: float = 1.5
@@ -93,7 +93,7 @@ class MatchConfig:
     speed_sigma_mps: float = 5.0
     standstill_m: float = 10.0
     standstill_sigmas: float = 4.0
-    uturn_penalty: float = 6.0
+    uturn_penalty: float = 10.0
     uturn_evidence_penalty: float = 3.0
     loop_penalty: float = 6.0
     use_travel: bool = True

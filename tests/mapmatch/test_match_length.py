@@ -1,0 +1,145 @@
+"""The matched length with noise around stops, U-turns, sparse corners and plain GPS (issue 11).
+
+Fixed seeds throughout; the accuracy matrix (benchmarks/bench_accuracy.py) measures the same
+behaviour over every shared extract.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pytest
+
+import mapmatch
+import roadnets
+from mapmatch.evaluate import score_geojson
+from mapmatch.simulate import SimulationConfig, simulate_trips, strip_to_class
+from tests.mapmatch.toy import drive, load, trace_of, write_osm
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+PRIMARY = {"highway": "primary"}
+RESIDENTIAL = {"highway": "residential"}
+
+
+def _stop_and_go(seed: int, *, stop_s: int, noise_m: float) -> mapmatch.Trace:
+    """
+    Drive 200 m east at 10 m/s, stand ``stop_s`` seconds, drive 200 m on (1 Hz, noisy).
+
+    The moving fixes get the same noise whatever ``stop_s``, so two such traces differ only
+    by the stop.
+    """
+    x1, y1, _, _ = drive([(0.0, 0.0), (200.0, 0.0)], speed_mps=10.0)
+    x3, y3, _, _ = drive([(200.0, 0.0), (400.0, 0.0)], speed_mps=10.0)
+    moving = np.random.default_rng(seed).normal(0.0, noise_m, (2, len(x1) + len(x3) - 1))
+    standing = np.random.default_rng(seed + 100).normal(0.0, noise_m, (2, stop_s))
+    n1 = len(x1)
+    x = np.concatenate((x1 + moving[0, :n1], 200.0 + standing[0], x3[1:] + moving[0, n1:]))
+    y = np.concatenate((y1 + moving[1, :n1], standing[1], y3[1:] + moving[1, n1:]))
+    return trace_of(x, y, time_s=np.arange(len(x), dtype=float))
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_forty_second_stop_adds_less_than_five_metres(tmp_path: Path, seed: int) -> None:
+    # a junction at the stop, so scattered fixes could be explained by turning off and back
+    net = load(
+        write_osm(
+            tmp_path / "stop.osm",
+            [
+                (1, [(-100, 0), (200, 0), (500, 0)], PRIMARY),
+                (2, [(200, 0), (200, 150)], RESIDENTIAL),
+                (3, [(200, 0), (200, -150)], RESIDENTIAL),
+            ],
+        )
+    )
+    stopped = mapmatch.match(_stop_and_go(seed, stop_s=40, noise_m=5.0), net)
+    driven = mapmatch.match(_stop_and_go(seed, stop_s=0, noise_m=5.0), net)
+    assert len(stopped.segments) == 1
+    assert stopped.way_ids() == [1]
+    assert stopped.distance_check.uturns == 0
+    assert abs(stopped.matched_length_m - driven.matched_length_m) < 5.0
+    assert stopped.matched_length_m == pytest.approx(400.0, abs=15.0)  # the ends' own noise
+
+
+def test_a_genuine_u_turn_is_kept(tmp_path: Path) -> None:
+    net = load(write_osm(tmp_path / "uturn.osm", [(20, [(-100, 0), (600, 0)], PRIMARY)]))
+    x, y, _, t = drive([(20.0, 0.0), (400.0, 0.0), (100.0, 0.0)], speed_mps=8.0)
+    rng = np.random.default_rng(5)
+    x = x + rng.normal(0.0, 5.0, len(x))
+    y = y + rng.normal(0.0, 5.0, len(y))
+    result = mapmatch.match(trace_of(x, y, time_s=t), net)  # positions only
+    edges = [e.edge for e in result.segments[0].edges]
+    assert len(edges) == 2
+    assert net.arrays.edge_twin[edges[0]] == edges[1]
+    assert result.distance_check.uturns == 1
+    assert result.matched_length_m == pytest.approx(680.0, rel=0.02)
+
+
+def _grid(tmp_path: Path, size: int = 5, block_m: float = 100.0) -> roadnets.RoadNetwork:
+    ways = []
+    for i in range(size):
+        row = [(j * block_m, i * block_m) for j in range(size)]
+        col = [(i * block_m, j * block_m) for j in range(size)]
+        ways.append((100 + i, row, RESIDENTIAL))
+        ways.append((200 + i, col, RESIDENTIAL))
+    return load(write_osm(tmp_path / "grid.osm", ways))
+
+
+@pytest.mark.parametrize("interval_s", [5.0, 15.0, 30.0])
+def test_sparse_fixes_on_corners_are_all_matched(tmp_path: Path, interval_s: float) -> None:
+    net = _grid(tmp_path)
+    # a staircase: every fix sits on a junction and the car turns at every one
+    corners = [(0, 0), (100, 0), (100, 100), (200, 100), (200, 200), (300, 200), (300, 300)]
+    x = np.array([c[0] for c in corners], dtype=float)
+    y = np.array([c[1] for c in corners], dtype=float)
+    t = np.arange(len(x)) * interval_s
+    result = mapmatch.match(trace_of(x, y, time_s=t), net)
+    points = result.points
+    assert points.matched.all()
+    assert not points.outlier.any()
+    assert not points.interpolated.any()
+    assert points.distance_m.max() < 1.0
+    assert result.matched_length_m == pytest.approx(600.0, abs=1.0)
+
+
+def test_no_filled_in_position_is_farther_than_the_search_radius(
+    default_net: roadnets.RoadNetwork,
+) -> None:
+    cfg = SimulationConfig(interval_s=1.0, noise_m=5.0, outlier_rate=0.05, outlier_m=60.0)
+    config = mapmatch.MatchConfig()
+    for trip in simulate_trips(default_net, cfg, count=3, seed=40):
+        result = mapmatch.match(trip.trace, default_net, config)
+        points = result.points
+        placed = points.matched & (points.interpolated | points.outlier)
+        assert placed.any()
+        assert (points.distance_m[placed] <= config.search_radius_m).all()
+
+
+@pytest.mark.parametrize("extract", ["monaco", "aguascalientes_mx.osm.bz2"])
+def test_plain_gps_one_second_trips_stay_within_one_percent(
+    extract: str, data_dir: Path, cache_dir: Path
+) -> None:
+    source = None if extract == "monaco" else data_dir / extract
+    net = roadnets.load(source, cache_dir=cache_dir)
+    # the accuracy matrix's 1 s / 5 m condition and its first ten trips
+    cfg = SimulationConfig(interval_s=1.0, noise_m=5.0, outlier_rate=0.02, route_length_m=3000.0)
+    errors = []
+    for trip in simulate_trips(net, cfg, count=10, seed=1000):
+        trace = strip_to_class(trip.trace, "positions")
+        score = score_geojson(mapmatch.match(trace, net).to_geojson(), trip.truth_record())
+        errors.append(score.length_error)
+        assert not score.spurious, score
+    assert np.abs(errors).max() < 0.01, errors
+
+
+def test_the_distance_check_says_what_the_length_rests_on(
+    default_net: roadnets.RoadNetwork,
+) -> None:
+    trip = simulate_trips(default_net, SimulationConfig(route_length_m=1500.0), count=1, seed=3)[0]
+    classes = {"positions": "positions", "heading_speed": "heading", "odometer": "odometer"}
+    for input_class, evidence in classes.items():
+        result = mapmatch.match(strip_to_class(trip.trace, input_class), default_net)
+        assert result.distance_check.evidence == evidence
+        assert result.to_geojson()["distance_check"]["evidence"] == evidence
