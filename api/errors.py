@@ -81,10 +81,6 @@ class RequestFieldError(ServiceError, ValueError):
 class OptionError(ConfigError):
     """A request option is unknown, out of bounds or given twice; names the field."""
 
-    def __init__(self, msg: str, *, field: str | None = None) -> None:
-        self.field = field
-        super().__init__(msg)
-
 
 class UnknownNetworkError(ServiceError, LookupError):
     """The request names a network this service does not serve."""

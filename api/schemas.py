@@ -10,11 +10,22 @@ it is and does not re-validate it, which would cost more than the match for long
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
-from pydantic import AliasChoices, BaseModel, ConfigDict, Field, PlainValidator, WithJsonSchema
+from pydantic import (
+    AliasChoices,
+    BaseModel,
+    ConfigDict,
+    Field,
+    PlainValidator,
+    WithJsonSchema,
+    create_model,
+)
 
-from mapmatch import OVERRIDABLE, MatchConfig
+from mapmatch import OVERRIDABLE, parameters
+
+if TYPE_CHECKING:
+    from mapmatch.config import Param
 
 __all__ = [
     "DistanceCheckOut",
@@ -33,9 +44,6 @@ __all__ = [
     "ReadyResponse",
     "SegmentFeature",
 ]
-
-_DEFAULT = MatchConfig()
-_LOW_BAND, _HIGH_BAND = _DEFAULT.distance_band
 
 
 def _time_value(value: object) -> float | str:
@@ -66,11 +74,6 @@ TimeValue = Annotated[
         }
     ),
 ]
-
-
-def _default(name: str, unit: str = "") -> str:
-    value = getattr(_DEFAULT, name)
-    return f" Server default: {value}{unit}."
 
 
 # --------------------------------------------------------------------------- request
@@ -154,119 +157,56 @@ class PointIn(BaseModel):
     )
 
 
-class MatchOptions(BaseModel):
-    """
-    Matcher parameters a request may override (``mapmatch.OVERRIDABLE``); omitted = default.
-
-    The bounds are the matcher's own rules, plus upper bounds the service sets so that one
-    request cannot ask for unbounded work.
-    """
-
-    model_config = ConfigDict(extra="forbid")
-
-    search_radius_m: float | None = Field(
-        default=None,
-        gt=0,
-        le=_DEFAULT.max_search_radius_m,
-        allow_inf_nan=False,
-        description="Roads farther than this from a fix are not considered, metres."
-        + _default("search_radius_m"),
-    )
-    max_candidates: int | None = Field(
-        default=None,
-        ge=1,
-        le=64,
-        description="Candidate directed edges kept per fix." + _default("max_candidates"),
-    )
-    sigma_m: float | None = Field(
-        default=None,
-        gt=0,
-        le=500,
-        allow_inf_nan=False,
-        description="1-sigma position error of a fix, metres." + _default("sigma_m"),
-    )
-    heading_sigma_deg: float | None = Field(
-        default=None,
-        gt=0,
-        le=180,
-        allow_inf_nan=False,
-        description="Spread of the heading around the road direction, degrees."
-        + _default("heading_sigma_deg"),
-    )
-    beta_m: float | None = Field(
-        default=None,
-        gt=0,
-        le=1000,
-        allow_inf_nan=False,
-        description="Scale of |great-circle - route distance| in the transition, metres."
-        + _default("beta_m"),
-    )
-    beta_per_s: float | None = Field(
-        default=None,
-        ge=0,
-        le=100,
-        allow_inf_nan=False,
-        description="Growth of the transition scale per second of sampling interval, m/s."
-        + _default("beta_per_s"),
-    )
-    uturn_penalty: float | None = Field(
-        default=None,
-        ge=0,
-        le=1000,
-        allow_inf_nan=False,
-        description="Cost of a U-turn in the middle of a road, nats." + _default("uturn_penalty"),
-    )
-    use_travel: bool | None = Field(
-        default=None,
-        description="Penalise routes that disagree with the odometer/speed travel."
-        + _default("use_travel"),
-    )
-    standstill_m: float | None = Field(
-        default=None,
-        ge=0,
-        le=1000,
-        allow_inf_nan=False,
-        description="A move backwards along one edge up to this far is a stopped car's noise, m."
-        + _default("standstill_m"),
-    )
-    thinning_sigmas: float | None = Field(
-        default=None,
-        ge=0,
-        le=100,
-        allow_inf_nan=False,
-        description="A fix within this many sigmas of the previous kept fix is left out."
-        + _default("thinning_sigmas"),
-    )
-    outlier_sigmas: float | None = Field(
-        default=None,
-        ge=0,
-        le=100,
-        allow_inf_nan=False,
-        description="A fix this many sigmas from where its neighbours put it is an outlier."
-        + _default("outlier_sigmas"),
-    )
-    distance_band: (
-        tuple[
+def _option_field(meta: Param, default: object) -> tuple[Any, Any]:
+    """The pydantic annotation and field of one overridable matcher parameter."""
+    description = meta.describe(default)
+    if meta.kind == "bool":
+        return bool | None, Field(default=None, description=description)
+    if meta.kind == "band":
+        band = tuple[
             Annotated[float, Field(gt=-1, le=0, allow_inf_nan=False)],
             Annotated[float, Field(ge=0, lt=10, allow_inf_nan=False)],
         ]
-        | None
-    ) = Field(
+        return band | None, Field(
+            default=None,
+            description=description + " A pair [low, high]: low in (-1, 0], high in [0, 10).",
+        )
+    if meta.kind == "int":
+        return int | None, Field(default=None, description=description, ge=meta.ge, le=meta.le)
+    return float | None, Field(
         default=None,
-        description=(
-            "Pass band [low, high] of the distance check's relative error (fractions, "
-            f"low in (-1, 0], high in [0, 10)). Server default: [{_LOW_BAND}, {_HIGH_BAND}]."
-        ),
+        description=description,
+        gt=meta.gt,
+        ge=meta.ge,
+        le=meta.le,
+        allow_inf_nan=False,
     )
+
+
+class _OptionsBase(BaseModel):
+    """Matcher parameters a request may override; omitted = the server's value."""
+
+    model_config = ConfigDict(extra="forbid")
 
     def overrides(self) -> dict[str, object]:
         """The options that were given, as ``MatchConfig.replace`` takes them."""
         return self.model_dump(exclude_none=True)
 
 
-if set(MatchOptions.model_fields) != OVERRIDABLE:  # pragma: no cover - caught at import
-    _msg = f"MatchOptions and mapmatch.OVERRIDABLE differ: {sorted(OVERRIDABLE)}"
-    raise RuntimeError(_msg)
+#: ``mapmatch.OVERRIDABLE`` as a request model: generated from the :class:`MatchConfig`
+#: field declarations (description, unit, bounds), so Python, the CLI and HTTP take the same.
+MatchOptions = create_model(
+    "MatchOptions",
+    __base__=_OptionsBase,
+    __doc__=(
+        "Matcher parameters a request may override (``mapmatch.OVERRIDABLE``); omitted = "
+        "default. Descriptions and bounds are the matcher's own (``mapmatch.parameters()``)."
+    ),
+    **{  # type: ignore[call-overload]
+        name: _option_field(meta, default)
+        for name, meta, default in parameters(overridable_only=True)
+    },
+)
 
 _CRS = Literal["wgs84", "gcj02", "bd09"]
 _CRS_DESCRIPTION = "Frame of the coordinates; GCJ-02 and BD-09 are converted to WGS84."

@@ -342,9 +342,9 @@ def _config(overrides: Mapping[str, object]) -> MatchConfig:
     try:
         return _BASE_CONFIG.replace(overrides)
     except ConfigError as exc:
-        text = str(exc)
-        name = text.split(" ", 1)[0]
-        raise OptionError(text, field=f"options.{name}" if name in OVERRIDABLE else None) from None
+        name = exc.field
+        field = f"options.{name}" if name in OVERRIDABLE else None
+        raise OptionError(str(exc), field=field) from None
 
 
 def _column(points: Sequence[PointIn], name: str) -> np.ndarray | None:

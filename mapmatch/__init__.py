@@ -9,7 +9,7 @@
 
 from __future__ import annotations
 
-from mapmatch.config import OVERRIDABLE, MatchConfig
+from mapmatch.config import OVERRIDABLE, MatchConfig, Param, parameters
 from mapmatch.distance import DistanceCheck
 from mapmatch.errors import (
     ConfigError,
@@ -43,11 +43,13 @@ __all__ = [
     "MatchedEdge",
     "MatchedPoints",
     "NoCandidatesError",
+    "Param",
     "RoadNetworkError",
     "Segment",
     "Trace",
     "TraceFileError",
     "TraceReport",
     "match",
+    "parameters",
     "read_traces",
 ]

@@ -1,18 +1,95 @@
-"""Every matching parameter in one validated object."""
+"""
+Every matching parameter in one validated object, each declared once with its metadata.
+
+A field of :class:`MatchConfig` carries, in :class:`Param` metadata, its description (what it
+does and where its default comes from), its unit, its bounds and whether one request may
+override it. Everything else is generated from that one declaration: validation
+(:meth:`MatchConfig.__post_init__`), :data:`OVERRIDABLE`, the ``mapmatch match`` flags
+(``--sigma-m``; :func:`add_config_flags`) and the HTTP ``options`` model (``api.schemas``). The
+defaults were chosen by measuring on the accuracy matrix (``benchmarks/bench_accuracy.py``:
+every shared extract x input class x sampling condition), not on one extract; docs/DESIGN.md
+holds the model they belong to.
+"""
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Literal
 
 from mapmatch.errors import ConfigError
 
 if TYPE_CHECKING:
-    from collections.abc import Callable, Mapping
+    import argparse
+    from collections.abc import Iterator, Mapping
 
-__all__ = ["OVERRIDABLE", "MatchConfig"]
+__all__ = [
+    "OVERRIDABLE",
+    "MatchConfig",
+    "Param",
+    "add_config_flags",
+    "config_from_flags",
+    "parameters",
+]
+
+Kind = Literal["float", "int", "bool", "band"]
+
+
+@dataclass(frozen=True, slots=True)
+class Param:
+    """
+    What one :class:`MatchConfig` field means and which values it takes.
+
+    Attributes
+    ----------
+    doc
+        What the parameter does, and the reason for its default.
+    unit
+        Unit of the value (``"m"``, ``"s"``, ``"nats"``, ...); empty for a pure number.
+    kind
+        ``float``, ``int``, ``bool`` or ``band`` (a ``(low, high)`` pair of fractions).
+    gt, ge, le
+        Bounds: greater than, at least, at most (``None``: none that side).
+    overridable
+        Whether one request (HTTP ``options``, CLI flags) may set it.
+    """
+
+    doc: str
+    unit: str = ""
+    kind: Kind = "float"
+    gt: float | None = None
+    ge: float | None = None
+    le: float | None = None
+    overridable: bool = False
+
+    def describe(self, default: object) -> str:
+        """One sentence for help texts: the doc, the unit and the default."""
+        unit = f" ({self.unit})" if self.unit else ""
+        return f"{self.doc}{unit}; default {_show(default)}."
+
+    def rule(self) -> str:
+        """The bounds as words, e.g. ``> 0 and <= 200``."""
+        parts = []
+        if self.gt is not None:
+            parts.append(f"> {_show(self.gt)}")
+        if self.ge is not None:
+            parts.append(f">= {_show(self.ge)}")
+        if self.le is not None:
+            parts.append(f"<= {_show(self.le)}")
+        return " and ".join(parts)
+
+
+def _show(value: object) -> str:
+    if isinstance(value, float):
+        return f"{value:g}"
+    if isinstance(value, tuple):
+        return ", ".join(_show(v) for v in value)
+    return str(value)
+
+
+def _param(default: Any, **meta: Any) -> Any:
+    return field(default=default, metadata={"param": Param(**meta)})
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -20,221 +97,446 @@ class MatchConfig:
     """
     Matcher parameters; defaults suit fused car traces at 1-30 s sampling.
 
-    Candidates
-        ``search_radius_m`` (50 m): roads farther from a fix are not considered. A fix whose
-        ``accuracy`` is poor widens its own radius to ``radius_accuracy_factor`` x accuracy,
-        never beyond ``max_search_radius_m`` (200 m). ``max_candidates`` (16) directed edges
-        are kept per fix; each direction of a two-way road counts, and every edge meeting at
-        a junction is as near as the junction, so fewer loses the true road near junctions
-        (8 tripled the route mismatch at 1 s on the Monaco extract).
-    Emission
-        ``sigma_m`` (5 m): 1-sigma position error of a fused fix (GNSS/INS loosely coupled
-        filters reach 3-4 m at 1 Hz, reference paper section 7; Newson & Krumm estimated
-        4.07 m for raw GNSS). A fix's own ``accuracy`` replaces it when larger.
-        ``heading_sigma_deg`` (25 deg): spread of the fused heading around the road direction
-        (about three times the 8 deg 1-sigma heading error of a smartphone GNSS/INS filter,
-        leaving room for lane changes and curves). Its weight grows linearly from 0 at
-        ``heading_min_speed_mps`` (1 m/s: a stopped car's heading means nothing) to 1 at
-        ``heading_full_speed_mps`` (10 m/s); a wrong heading costs at most
-        ``heading_max_penalty`` (12 nats), so a bad heading sample cannot veto the true road.
-    Transition
-        Exponential in ``|great-circle - route distance|`` with scale
-        ``beta_m + beta_per_s * dt`` (3 m + 0.3 m/s): chords cut curves more the longer the
-        sampling interval, so the scale grows with it (Newson & Krumm's beta grows with the
-        interval likewise). Routes are searched up to ``route_factor * great-circle +
-        route_slack_m`` (2 x + 300 m). Speed plausibility: the speed a path needs
-        (route / dt, less twice sigma for noise) above ``speed_factor`` x the path's speed
-        limit + ``speed_margin_mps`` (1.5 x + 5 m/s) costs a Gaussian penalty with
-        ``speed_sigma_mps`` (5 m/s). A move backwards along the same edge of at most
-        ``standstill_m`` (10 m) or ``standstill_sigmas`` x sigma (4, so 20 m at 5 m) is noise
-        around a slow or stopped car, not a turn; a U-turn in the middle of a road
-        costs ``uturn_penalty`` (6 nats). Fused traces know how far the car went between two
-        fixes (odometer increments, else the mean reported speed x dt); with ``use_travel``
-        a route that differs from that by more than ``travel_tolerance_m +
-        travel_tolerance_frac * travel + travel_tolerance_mps * dt`` (5 m + 15 % + 0.5 m/s x
-        dt) costs the excess / ``travel_beta_m`` (2 m). The tolerance is wide on purpose:
-        the term rejects loops around a stopped car and detours, but never pulls the matched
-        length towards the fused one, which the distance check must judge independently.
-    Fix selection
-        As Newson & Krumm do, a fix within ``thinning_sigmas`` x sigma (2) of the previous
-        kept fix adds nothing but noise (a stopped or crawling car) and is left out of the
-        model. A fix farther than ``outlier_sigmas`` x sigma (5) from where its neighbours put
-        it (both at most ``outlier_max_gap_s``, 5 s, away) is an outlier and left out too.
-        A transition less likely than ``min_log_transition`` (-50 nats: a loop around a block
-        to go 30 m back, a detour of hundreds of metres) is taken as impossible: such moves
-        come from a displaced fix, not from driving. Where the trace then breaks, up to
-        ``max_break_repairs`` (8) times the fix at the break is left out if that joins the
-        pieces. Left-out fixes get the position on the
-        matched path interpolated by time, and are flagged in the output.
-    Distance check
-        ``distance_band`` (-4 % .. +1 %): the relative error of the fused trip distance against
-        the matched road length that passes; the metering tolerance of JJG 517 taximeters.
+    Each field documents itself (``parameters()`` lists them with their :class:`Param`);
+    the groups are candidates, emission, transition, observations and outliers, loops, and
+    the distance check. Invalid values raise :class:`~mapmatch.errors.ConfigError` naming the
+    field (``error.field``), the rule and the value.
+
+    Examples
+    --------
+    >>> MatchConfig(sigma_m=8.0).sigma_m
+    8.0
+    >>> MatchConfig(sigma_m=-1.0)
+    Traceback (most recent call last):
+    ...
+    mapmatch.errors.ConfigError: sigma_m must be > 0 (got -1)
     """
 
-    search_radius_m: float = 50.0
-    max_search_radius_m: float = 200.0
-    radius_accuracy_factor: float = 4.0
-    max_candidates: int = 16
-    candidate_margin: float = 10.0
-    sigma_m: float = 5.0
-    estimate_sigma: bool = True
-    max_emission_penalty: float = 8.0
-    heading_sigma_deg: float = 25.0
-    heading_min_speed_mps: float = 1.0
-    heading_full_speed_mps: float = 10.0
-    heading_max_penalty: float = 12.0
-    beta_m: float = 3.0
-    beta_per_s: float = 0.3
-    beta_per_sigma: float = 0.3
-    route_factor: float = 2.0
-    route_slack_m: float = 300.0
-    speed_factor: float = 1.5
-    speed_margin_mps: float = 5.0
-    speed_sigma_mps: float = 5.0
-    standstill_m: float = 10.0
-    standstill_sigmas: float = 4.0
-    uturn_penalty: float = 10.0
-    uturn_evidence_penalty: float = 3.0
-    loop_penalty: float = 6.0
-    use_travel: bool = True
-    travel_tolerance_m: float = 5.0
-    travel_tolerance_frac: float = 0.15
-    travel_tolerance_mps: float = 0.5
-    travel_beta_m: float = 2.0
-    travel_accel_mps2: float = 3.0
-    nominal_speed_mps: float = 10.0
-    max_speed_mps: float = 50.0
-    thinning_sigmas: float = 2.0
-    outlier_sigmas: float = 5.0
-    outlier_max_gap_s: float = 5.0
-    outlier_detour_ratio: float = 2.0
-    outlier_max_run: int = 3
-    max_break_repairs: int = 8
-    min_log_transition: float = -50.0
-    distance_band: tuple[float, float] = (-0.04, 0.01)
+    # --- candidates
+    search_radius_m: float = _param(
+        50.0,
+        doc="roads farther from a fix are not considered; a fix with a poor accuracy widens "
+        "its own radius to radius_accuracy_factor x accuracy",
+        unit="m",
+        gt=0,
+        le=200,
+        overridable=True,
+    )
+    max_search_radius_m: float = _param(
+        200.0, doc="widest radius a poor accuracy may ask for", unit="m", gt=0, le=5000
+    )
+    radius_accuracy_factor: float = _param(
+        4.0, doc="radius of a fix with a poor accuracy, in accuracies", gt=0, le=100
+    )
+    max_candidates: int = _param(
+        16,
+        doc="directed edges kept per fix; each direction of a two-way road counts and every "
+        "edge at a junction is as near as the junction, so fewer loses the true road there "
+        "(8 tripled the route mismatch at 1 s on Monaco)",
+        kind="int",
+        ge=1,
+        le=64,
+        overridable=True,
+    )
+    candidate_margin: float = _param(
+        10.0,
+        doc="candidates whose emission is this much worse than the fix's best are dropped",
+        unit="nats",
+        ge=0,
+        le=1000,
+    )
+    # --- emission
+    sigma_m: float = _param(
+        5.0,
+        doc="1-sigma position error of a fix (fused GNSS/INS reaches 3-4 m at 1 Hz; Newson & "
+        "Krumm found 4.07 m for raw GNSS); a fix's own accuracy replaces it when larger",
+        unit="m",
+        gt=0,
+        le=500,
+        overridable=True,
+    )
+    estimate_sigma: bool = _param(
+        True,
+        doc="without an accuracy column, estimate the trace's own position error (1.4826 x "
+        "the median distance to the nearest road, Newson & Krumm) when its fixes are "
+        "sparse, and use it when it is larger than sigma_m",
+        kind="bool",
+        overridable=True,
+    )
+    max_emission_penalty: float = _param(
+        8.0,
+        doc="floor of the emission (at 4 sigma): an outlier cannot veto the true road",
+        unit="nats",
+        ge=0,
+        le=1000,
+    )
+    heading_sigma_deg: float = _param(
+        25.0,
+        doc="spread of the heading around the road direction (three times the 8 deg of a "
+        "phone GNSS/INS filter, room for lane changes and curves)",
+        unit="deg",
+        gt=0,
+        le=180,
+        overridable=True,
+    )
+    heading_min_speed_mps: float = _param(
+        1.0, doc="speed below which the heading counts for nothing", unit="m/s", ge=0, le=100
+    )
+    heading_full_speed_mps: float = _param(
+        10.0, doc="speed from which the heading counts fully", unit="m/s", gt=0, le=100
+    )
+    heading_max_penalty: float = _param(
+        12.0,
+        doc="most a wrong heading costs, so one bad sample cannot veto the true road",
+        unit="nats",
+        ge=0,
+        le=1000,
+    )
+    # --- transition
+    beta_m: float = _param(
+        3.0,
+        doc="scale of |great-circle - route distance| (Newson & Krumm's exponential)",
+        unit="m",
+        gt=0,
+        le=1000,
+        overridable=True,
+    )
+    beta_per_s: float = _param(
+        0.3,
+        doc="growth of that scale per second between fixes: chords cut curves more the longer "
+        "the interval",
+        unit="m/s",
+        ge=0,
+        le=100,
+        overridable=True,
+    )
+    beta_per_sigma: float = _param(
+        0.3,
+        doc="growth of that scale per metre of position sigma: two noisy fixes are farther "
+        "apart than the road between them (0.3 cut spurious U-turns at 1 s on the matrix)",
+        ge=0,
+        le=100,
+    )
+    route_factor: float = _param(
+        2.0, doc="routes are searched up to this many times the great-circle", gt=0, le=100
+    )
+    route_slack_m: float = _param(300.0, doc="plus this much", unit="m", ge=0, le=100_000)
+    speed_factor: float = _param(
+        1.5,
+        doc="a route needing more than this many times its speed limit (plus speed_margin_mps) "
+        "costs a Gaussian penalty",
+        gt=0,
+        le=100,
+    )
+    speed_margin_mps: float = _param(5.0, doc="see speed_factor", unit="m/s", ge=0, le=1000)
+    speed_sigma_mps: float = _param(5.0, doc="spread of that penalty", unit="m/s", gt=0, le=1000)
+    nominal_speed_mps: float = _param(
+        10.0,
+        doc="speed assumed for a step without a usable time (none given, or a repeated one): "
+        "the interval that widens beta is the step over this speed",
+        unit="m/s",
+        gt=0,
+        le=100,
+    )
+    max_speed_mps: float = _param(50.0, doc="faster than any car drives", unit="m/s", gt=0, le=1000)
+    standstill_m: float = _param(
+        10.0,
+        doc="a fix this far behind the previous one (or standstill_sigmas x sigma, if more), on "
+        "its edge or across edges, may be a held car's scatter instead of a U-turn or a loop",
+        unit="m",
+        ge=0,
+        le=1000,
+        overridable=True,
+    )
+    standstill_sigmas: float = _param(4.0, doc="see standstill_m", unit="sigmas", ge=0, le=100)
+    uturn_penalty: float = _param(
+        10.0,
+        doc="cost of a U-turn without heading evidence: one must not explain a small "
+        "backward move (6 let noise make 4 % of plain-GPS trips turn; 10 keeps true U-turns)",
+        unit="nats",
+        ge=0,
+        le=1000,
+        overridable=True,
+    )
+    uturn_evidence_penalty: float = _param(
+        3.0,
+        doc="cost of a U-turn whose fixes' headings point apart at speed",
+        unit="nats",
+        ge=0,
+        le=1000,
+    )
+    loop_penalty: float = _param(
+        6.0,
+        doc="a loop or a drive back after a U-turn must explain its fixes this much better "
+        "than holding where it began (priced after Viterbi; see mapmatch.loops)",
+        unit="nats",
+        ge=0,
+        le=1000,
+        overridable=True,
+    )
+    use_travel: bool = _param(
+        True,
+        doc="hold routes against the distance the trace says it travelled (odometer, else the "
+        "reported speed integrated over every fix)",
+        kind="bool",
+        overridable=True,
+    )
+    travel_tolerance_m: float = _param(
+        5.0,
+        doc="a route within this much (plus travel_tolerance_frac of the travel) of the travel "
+        "costs nothing: wide on purpose, so the fused distance never pulls the matched length, "
+        "which the distance check judges independently",
+        unit="m",
+        ge=0,
+        le=10_000,
+    )
+    travel_tolerance_frac: float = _param(0.15, doc="see travel_tolerance_m", ge=0, le=10)
+    travel_tolerance_mps: float = _param(
+        0.5, doc="error of a reported speed: adds this x dt of slack", unit="m/s", ge=0, le=100
+    )
+    travel_accel_mps2: float = _param(
+        3.0,
+        doc="a speed-integrated travel's slack per step is what the speed may change by "
+        "between two samples at this acceleration (a x dt^2 / 4): about 1 m at 1 s, useless "
+        "at 15 s",
+        unit="m/s2",
+        ge=0,
+        le=100,
+    )
+    travel_beta_m: float = _param(
+        2.0, doc="scale of the cost beyond the tolerance", unit="m", gt=0, le=10_000
+    )
+    min_log_transition: float = _param(
+        -50.0,
+        doc="a transition less likely than this (a loop round a block to go 30 m back) is "
+        "taken as impossible: it comes from a displaced fix, not from driving",
+        unit="nats",
+        ge=-1e6,
+        le=-1e-9,
+    )
+    max_break_repairs: int = _param(
+        8,
+        doc="where the trace breaks, this many times the fix at the break is left out if that "
+        "joins the pieces",
+        kind="int",
+        ge=0,
+        le=1000,
+    )
+    # --- observations and outliers
+    thinning_sigmas: float = _param(
+        2.0,
+        doc="consecutive fixes within this many sigmas of their running centroid are one "
+        "observation: a stopped or crawling car is one state (Newson & Krumm thin at 2 sigma)",
+        unit="sigmas",
+        ge=0,
+        le=100,
+        overridable=True,
+    )
+    outlier_sigmas: float = _param(
+        5.0,
+        doc="a fix this many sigmas from its neighbours that sticks out from them is an outlier",
+        unit="sigmas",
+        ge=0,
+        le=100,
+        overridable=True,
+    )
+    outlier_max_gap_s: float = _param(
+        5.0,
+        doc="outliers and strays are judged only between fixes this close in time: at sparse "
+        "sampling a fix that sticks out is a car that went somewhere",
+        unit="s",
+        ge=0,
+        le=100_000,
+    )
+    outlier_detour_ratio: float = _param(
+        2.0,
+        doc="an outlier sticks out farther than its neighbours are apart (the way through it "
+        "this many times their distance); a right-angle corner is 1.41",
+        gt=1,
+        le=100,
+    )
+    outlier_max_run: int = _param(
+        3,
+        doc="longest run of fixes far from every road between on-road fixes taken as displaced",
+        kind="int",
+        ge=0,
+        le=1000,
+    )
+    # --- distance check
+    distance_band: tuple[float, float] = _param(
+        (-0.04, 0.01),
+        doc="relative error (fused - matched) / matched that passes: the metering tolerance "
+        "of JJG 517 taximeters",
+        kind="band",
+        overridable=True,
+    )
 
     def __post_init__(self) -> None:
-        positive = (
-            "search_radius_m",
-            "max_search_radius_m",
-            "radius_accuracy_factor",
-            "sigma_m",
-            "heading_sigma_deg",
-            "heading_full_speed_mps",
-            "beta_m",
-            "route_factor",
-            "travel_beta_m",
-            "speed_factor",
-            "speed_sigma_mps",
-            "nominal_speed_mps",
-            "max_speed_mps",
-        )
-        non_negative = (
-            "max_emission_penalty",
-            "candidate_margin",
-            "heading_min_speed_mps",
-            "heading_max_penalty",
-            "beta_per_s",
-            "beta_per_sigma",
-            "route_slack_m",
-            "speed_margin_mps",
-            "standstill_m",
-            "standstill_sigmas",
-            "uturn_penalty",
-            "uturn_evidence_penalty",
-            "loop_penalty",
-            "travel_tolerance_m",
-            "travel_tolerance_frac",
-            "travel_tolerance_mps",
-            "thinning_sigmas",
-            "outlier_sigmas",
-            "outlier_max_gap_s",
-            "outlier_detour_ratio",
-            "travel_accel_mps2",
-        )
-        for name in positive:
-            _check(name, getattr(self, name), lambda v: v > 0, "must be > 0")
-        for name in non_negative:
-            _check(name, getattr(self, name), lambda v: v >= 0, "must be >= 0")
-        if not (math.isfinite(self.min_log_transition) and self.min_log_transition < 0):
-            msg = (
-                f"min_log_transition must be a finite number < 0 (got {self.min_log_transition!r})"
-            )
-            raise ConfigError(msg)
-        if not isinstance(self.max_break_repairs, int) or self.max_break_repairs < 0:
-            msg = f"max_break_repairs must be an integer >= 0 (got {self.max_break_repairs!r})"
-            raise ConfigError(msg)
-        if not isinstance(self.max_candidates, int) or not 1 <= self.max_candidates <= 64:
-            msg = f"max_candidates must be an integer in 1..64 (got {self.max_candidates!r})"
-            raise ConfigError(msg)
+        for name, meta in _PARAMS.items():
+            _check(name, meta, getattr(self, name))
         if self.search_radius_m > self.max_search_radius_m:
             msg = (
                 f"search_radius_m must be <= max_search_radius_m "
                 f"(got {self.search_radius_m:g} > {self.max_search_radius_m:g})"
             )
-            raise ConfigError(msg)
-        if self.max_search_radius_m > 5000:
-            msg = f"max_search_radius_m must be <= 5000 (got {self.max_search_radius_m:g})"
-            raise ConfigError(msg)
+            raise ConfigError(msg, field="search_radius_m")
         if self.heading_min_speed_mps >= self.heading_full_speed_mps:
             msg = (
                 "heading_min_speed_mps must be below heading_full_speed_mps "
                 f"(got {self.heading_min_speed_mps:g} >= {self.heading_full_speed_mps:g})"
             )
-            raise ConfigError(msg)
-        low, high = self.distance_band
-        if not (math.isfinite(low) and math.isfinite(high) and -1 < low <= 0 <= high < 10):
-            msg = (
-                f"distance_band must be (low <= 0, high >= 0) fractions (got {self.distance_band})"
-            )
-            raise ConfigError(msg)
+            raise ConfigError(msg, field="heading_min_speed_mps")
 
     def replace(self, overrides: Mapping[str, object]) -> MatchConfig:
         """
         A copy with some fields changed; only names in :data:`OVERRIDABLE` are accepted.
 
-        Raises
-        ------
-        ConfigError
-            An unknown or non-overridable field, or a value that breaks a rule.
+        A ``distance_band`` may be given as a list. Raises
+        :class:`~mapmatch.errors.ConfigError` (with ``field`` set) for an unknown or
+        non-overridable field, or a value that breaks its rule.
         """
         unknown = sorted(set(overrides) - OVERRIDABLE)
         if unknown:
             msg = f"unknown option(s) {unknown}; allowed: {sorted(OVERRIDABLE)}"
-            raise ConfigError(msg)
+            raise ConfigError(msg, field=unknown[0])
         changes = dict(overrides)
         if "distance_band" in changes:
             band = changes["distance_band"]
             if not isinstance(band, list | tuple) or len(band) != 2:
                 msg = f"distance_band must be a pair [low, high] (got {band!r})"
-                raise ConfigError(msg)
-            changes["distance_band"] = (float(band[0]), float(band[1]))
+                raise ConfigError(msg, field="distance_band")
+            changes["distance_band"] = tuple(band)
         return dataclasses.replace(self, **changes)  # type: ignore[arg-type]
 
 
-def _check(name: str, value: object, rule: Callable[[float], bool], text: str) -> None:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+def _check(name: str, meta: Param, value: object) -> None:
+    """Raise :class:`ConfigError` unless ``value`` fits ``meta``'s kind and bounds."""
+    if meta.kind == "bool":
+        if not isinstance(value, bool):
+            msg = f"{name} must be true or false (got {value!r})"
+            raise ConfigError(msg, field=name)
+        return
+    if meta.kind == "band":
+        pair = value if isinstance(value, tuple) and len(value) == 2 else (math.nan, math.nan)
+        numbers = [
+            float(v) if isinstance(v, int | float) and not isinstance(v, bool) else math.nan
+            for v in pair
+        ]
+        low, high = numbers
+        if not (math.isfinite(low) and math.isfinite(high) and -1 < low <= 0 <= high < 10):
+            msg = f"{name} must be (low <= 0, high >= 0) fractions (got {value!r})"
+            raise ConfigError(msg, field=name)
+        return
+    if isinstance(value, bool) or not isinstance(value, int | float):
         msg = f"{name} must be a finite number (got {value!r})"
-        raise ConfigError(msg)
-    if not rule(value):
-        msg = f"{name} {text} (got {value:g})"
-        raise ConfigError(msg)
+        raise ConfigError(msg, field=name)
+    if not math.isfinite(value):
+        msg = f"{name} must be a finite number (got {value!r})"
+        raise ConfigError(msg, field=name)
+    if meta.kind == "int" and not isinstance(value, int):
+        msg = f"{name} must be a whole number (got {value!r})"
+        raise ConfigError(msg, field=name)
+    v = float(value)
+    for bound, ok, word in (
+        (meta.gt, meta.gt is None or v > meta.gt, ">"),
+        (meta.ge, meta.ge is None or v >= meta.ge, ">="),
+        (meta.le, meta.le is None or v <= meta.le, "<="),
+    ):
+        if not ok:
+            msg = f"{name} must be {word} {_show(bound)} (got {v:g})"
+            raise ConfigError(msg, field=name)
 
+
+_PARAMS: dict[str, Param] = {
+    f.name: f.metadata["param"] for f in dataclasses.fields(MatchConfig) if "param" in f.metadata
+}
+_DEFAULTS: dict[str, Any] = {f.name: f.default for f in dataclasses.fields(MatchConfig)}
 
 #: Fields a single request (HTTP ``options``, CLI flags) may override.
-OVERRIDABLE = frozenset(
-    {
-        "search_radius_m",
-        "max_candidates",
-        "sigma_m",
-        "heading_sigma_deg",
-        "beta_m",
-        "beta_per_s",
-        "uturn_penalty",
-        "use_travel",
-        "standstill_m",
-        "thinning_sigmas",
-        "outlier_sigmas",
-        "distance_band",
-    }
-)
+OVERRIDABLE = frozenset(name for name, meta in _PARAMS.items() if meta.overridable)
+
+
+def parameters(*, overridable_only: bool = False) -> Iterator[tuple[str, Param, Any]]:
+    """
+    Every parameter of :class:`MatchConfig`: ``(name, metadata, default)``, in field order.
+
+    Examples
+    --------
+    >>> name, meta, default = next(parameters(overridable_only=True))
+    >>> name, meta.unit, default
+    ('search_radius_m', 'm', 50.0)
+    """
+    for name, meta in _PARAMS.items():
+        if meta.overridable or not overridable_only:
+            yield name, meta, _DEFAULTS[name]
+
+
+def _flag(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def add_config_flags(parser: argparse.ArgumentParser) -> None:
+    """
+    Add one flag per overridable parameter (``--sigma-m``), its help generated from the field.
+
+    Values are parsed and checked with :meth:`MatchConfig.replace`
+    (:func:`config_from_flags`), so the CLI takes exactly what HTTP ``options`` take.
+    """
+    group = parser.add_argument_group("matcher options (each a MatchConfig field)")
+    for name, meta, default in parameters(overridable_only=True):
+        bounds = f" Must be {meta.rule()}." if meta.rule() else ""
+        sentence = meta.describe(default)
+        text = (sentence[:1].upper() + sentence[1:] + bounds).replace("%", "%%")
+        if meta.kind == "bool":
+            group.add_argument(
+                _flag(name),
+                dest=name,
+                default=None,
+                metavar="true|false",
+                help=text,
+            )
+            continue
+        metavar = "LOW,HIGH" if meta.kind == "band" else meta.unit.upper() or "N"
+        group.add_argument(
+            _flag(name),
+            dest=name,
+            default=None,
+            metavar=metavar.replace("/", "_"),
+            help=text,
+        )
+
+
+def config_from_flags(
+    values: Mapping[str, str | None], base: MatchConfig | None = None
+) -> MatchConfig:
+    """
+    The configuration the flags of :func:`add_config_flags` ask for.
+
+    Raises
+    ------
+    ConfigError
+        A value that is not of the field's kind or breaks its rule; ``field`` names it.
+    """
+    overrides: dict[str, object] = {}
+    for name, meta, _default in parameters(overridable_only=True):
+        text = values.get(name)
+        if text is None:
+            continue
+        overrides[name] = _parse(name, meta, text)
+    return (base or MatchConfig()).replace(overrides)
+
+
+def _parse(name: str, meta: Param, text: str) -> object:
+    try:
+        if meta.kind == "bool":
+            return {"true": True, "false": False}[text.strip().lower()]
+        if meta.kind == "band":
+            low, high = (float(v) for v in text.split(","))
+            return (low, high)
+        if meta.kind == "int":
+            return int(text)
+        return float(text)
+    except (KeyError, ValueError):
+        shape = {"bool": "true or false", "band": "LOW,HIGH", "int": "a whole number"}
+        msg = f"{name} must be {shape.get(meta.kind, 'a number')} (got {text!r})"
+        raise ConfigError(msg, field=name) from None

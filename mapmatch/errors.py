@@ -91,7 +91,18 @@ class InputTypeError(MapMatchError, TypeError):
 
 
 class ConfigError(MapMatchError, ValueError):
-    """A matcher parameter breaks its rule; the message names the field, the rule and value."""
+    """
+    A matcher parameter breaks its rule; the message names the field, the rule and value.
+
+    Attributes
+    ----------
+    field
+        The offending parameter's name, when one is to blame.
+    """
+
+    def __init__(self, message: str, *, field: str | None = None) -> None:
+        super().__init__(message)
+        self.field = field
 
 
 class NoCandidatesError(MapMatchError, ValueError):

@@ -270,7 +270,7 @@ def log_transition(
     >>> from mapmatch.config import MatchConfig
     >>> log_transition(np.array([10.0]), np.array([13.0]), np.array([1.0]),
     ...                np.array([1]), np.array([1.0]), np.array([5.0]), MatchConfig())
-    array([-0.90909091])
+    array([-0.625])
     """
     # a step without a usable time (none known, or a repeated one) is a distance-only step:
     # no speed term, and the interval that widens beta is the one a car at the nominal speed

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 from mapmatch.batch import BatchOptions, BatchReport, run_batch
 from mapmatch.batch_outputs import FORMATS, SUMMARY_NAME
-from mapmatch.config import MatchConfig
+from mapmatch.config import MatchConfig, add_config_flags, config_from_flags
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -30,16 +30,6 @@ if TYPE_CHECKING:
 
 __all__ = ["add_parser", "run"]
 
-#: Command-line flags that set :class:`~mapmatch.MatchConfig` fields: flag -> (field, type).
-CONFIG_FLAGS: dict[str, tuple[str, type]] = {
-    "--search-radius-m": ("search_radius_m", float),
-    "--max-candidates": ("max_candidates", int),
-    "--sigma-m": ("sigma_m", float),
-    "--heading-sigma-deg": ("heading_sigma_deg", float),
-    "--beta-m": ("beta_m", float),
-    "--beta-per-s": ("beta_per_s", float),
-    "--uturn-penalty": ("uturn_penalty", float),
-}
 _SHOW_FAILED = 5
 
 
@@ -54,15 +44,6 @@ def _positive_int(text: str) -> int:
     return value
 
 
-def _band(text: str) -> tuple[float, float]:
-    try:
-        low, high = (float(v) for v in text.split(","))
-    except ValueError:
-        msg = f"must be LOW,HIGH fractions such as -0.04,0.01 (got {text!r})"
-        raise argparse.ArgumentTypeError(msg) from None
-    return low, high
-
-
 def add_parser(subparsers: argparse._SubParsersAction[Any]) -> argparse.ArgumentParser:
     """
     Register the ``match`` sub-command.
@@ -72,7 +53,6 @@ def add_parser(subparsers: argparse._SubParsersAction[Any]) -> argparse.Argument
     subparsers
         The object returned by ``ArgumentParser.add_subparsers()``.
     """
-    defaults = MatchConfig()
     p: argparse.ArgumentParser = subparsers.add_parser(
         "match",
         help="match trace files or folders; one output per trace plus summary.csv",
@@ -149,51 +129,21 @@ def add_parser(subparsers: argparse._SubParsersAction[Any]) -> argparse.Argument
         metavar="N",
         help="traces per task (default: about four tasks per worker, at most 32)",
     )
-    opts = p.add_argument_group("matcher options (MatchConfig fields)")
-    for flag, (name, kind) in CONFIG_FLAGS.items():
-        opts.add_argument(
-            flag,
-            type=kind,
-            default=None,
-            metavar="X",
-            help=f"{name} (default {getattr(defaults, name)})",
-        )
-    opts.add_argument(
-        "--distance-band",
-        type=_band,
-        default=None,
-        metavar="LOW,HIGH",
-        help=f"distance check pass band, fractions (default {defaults.distance_band[0]:g},"
-        f"{defaults.distance_band[1]:g})",
-    )
-    opts.add_argument(
-        "--no-travel",
-        action="store_true",
-        help="ignore odometer/speed travel distances in the transition (use_travel=False)",
-    )
+    add_config_flags(p)
     p.set_defaults(run=run)
     return p
 
 
 def config_from_args(args: argparse.Namespace) -> MatchConfig:
     """
-    The :class:`~mapmatch.MatchConfig` the flags ask for.
+    The :class:`~mapmatch.MatchConfig` the flags ask for (one flag per overridable field).
 
     Raises
     ------
     ConfigError
-        A value breaks its rule (the message names the field).
+        A value breaks its rule (the message and ``field`` name the parameter).
     """
-    overrides: dict[str, object] = {}
-    for flag, (name, _kind) in CONFIG_FLAGS.items():
-        value = getattr(args, flag[2:].replace("-", "_"))
-        if value is not None:
-            overrides[name] = value
-    if args.distance_band is not None:
-        overrides["distance_band"] = args.distance_band
-    if args.no_travel:
-        overrides["use_travel"] = False
-    return MatchConfig().replace(overrides)
+    return config_from_flags(vars(args))
 
 
 class _Bar:

@@ -38,7 +38,7 @@ def test_heading_counts_more_the_faster_the_car() -> None:
 
 
 def test_transition_is_exponential_in_the_distance_mismatch() -> None:
-    cfg = MatchConfig(beta_m=4.0, beta_per_s=0.0)
+    cfg = MatchConfig(beta_m=4.0, beta_per_s=0.0, beta_per_sigma=0.0)
     one = np.ones(3)
     lt = log_transition(
         np.array([10.0, 10.0, 10.0]),
@@ -104,7 +104,7 @@ def test_reported_travel_only_counts_outside_its_tolerance() -> None:
         cfg,
         travel,
     )
-    base = -np.abs(gc - route) / (cfg.beta_m + cfg.beta_per_s * 5.0)
+    base = -np.abs(gc - route) / (cfg.beta_m + cfg.beta_per_s * 5.0 + cfg.beta_per_sigma * 5.0)
     tolerance = cfg.travel_tolerance_m + cfg.travel_tolerance_frac * 50.0
     assert lt[1] == pytest.approx(base[1])  # 5 m off is inside the tolerance
     assert lt[2] == pytest.approx(base[2] - (70.0 - tolerance) / cfg.travel_beta_m)
@@ -124,8 +124,11 @@ def test_candidate_pairs_cover_every_pair_of_consecutive_fixes() -> None:
     [
         ("sigma_m", -1.0, "sigma_m must be > 0 (got -1)"),
         ("sigma_m", float("nan"), "sigma_m must be a finite number"),
-        ("search_radius_m", 10_000.0, "search_radius_m must be <= max_search_radius_m"),
-        ("max_candidates", 0, "max_candidates must be an integer in 1..64"),
+        ("search_radius_m", 10_000.0, "search_radius_m must be <= 200 (got 10000)"),
+        ("max_search_radius_m", 40.0, "search_radius_m must be <= max_search_radius_m"),
+        ("max_candidates", 0, "max_candidates must be >= 1 (got 0)"),
+        ("max_candidates", 2.5, "max_candidates must be a whole number"),
+        ("use_travel", 1, "use_travel must be true or false"),
         ("beta_m", 0.0, "beta_m must be > 0"),
         ("distance_band", (0.01, -0.04), "distance_band"),
     ],
@@ -134,6 +137,7 @@ def test_config_errors_name_the_field_and_value(field: str, value: object, needl
     with pytest.raises(ConfigError) as caught:
         MatchConfig(**{field: value})  # type: ignore[arg-type]
     assert needle in str(caught.value)
+    assert caught.value.field in (field, "search_radius_m")
 
 
 def test_config_overrides_are_limited_to_the_documented_fields() -> None:
