@@ -4,13 +4,31 @@ One reader for every format (libosmium through the ``osmium`` package): ``.osm``
 ``.osm.gz`` and ``.osm.pbf`` give the same ways, so the graph is the same whichever file a user
 has. Ways clipped at the extract border (nodes missing from the file) are kept as the runs of
 nodes that are present.
+
+Corrupt coordinates
+-------------------
+A node whose ``lat``/``lon`` is not a coordinate makes the whole file an
+:class:`~roadnets.errors.InvalidNetworkSourceError` naming the node, the attribute, its text and
+its line: libosmium itself stops at ``nan``, ``inf``, ``""`` or ``1e3`` (we only turn its
+``InvalidLocationError`` into the project's error and find the node), and a node of a road out
+of range (``lat="91.5"``, in XML or PBF) is refused rather than taken for a node missing from a
+clipped extract. libosmium reads some overflowing exponents (``1e99``, ``1e999``) as 0 without
+a word; every node of a road exactly on the equator or the prime meridian in an XML file is
+therefore checked against its text. Skipping such a node instead (with a counted warning) would
+cut its road in two or join it to the wrong place: a file with one corrupt coordinate may have
+more, and is better fixed or exported again than half read. (osmnx has no check: its XML reader
+keeps ``nan`` and ``inf`` as node positions.)
 """
 
 from __future__ import annotations
 
+import bz2
+import gzip
+import math
+import re
 from collections import Counter
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import IO, TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -20,6 +38,7 @@ from roadnets.drivable import is_drivable
 from roadnets.errors import InvalidNetworkSourceError
 
 if TYPE_CHECKING:
+    from collections.abc import Iterator
     from pathlib import Path
 
 __all__ = ["OsmExtract", "OsmWay", "TurnRestriction", "read_osm"]
@@ -80,22 +99,101 @@ class OsmExtract:
     skipped_restrictions: dict[str, int] = field(default_factory=dict)
 
 
-def _osmium_file(path: Path) -> osmium.io.File:
-    """Pick libosmium's format from the file's first bytes, not only its name."""
+def _format_of(path: Path) -> str:
+    """Name libosmium's format for a file from its first bytes, not only its name."""
     with path.open("rb") as handle:
         head = handle.read(64)
     if head.startswith(b"BZh"):
-        fmt = "osm.bz2"
-    elif head.startswith(b"\x1f\x8b"):
-        fmt = "osm.gz"
-    elif b"OSMHeader" in head:
-        fmt = "pbf"
-    elif head.lstrip().startswith(b"<"):
-        fmt = "osm"
-    else:
-        msg = "not OSM XML (.osm, .osm.bz2, .osm.gz) nor PBF (.osm.pbf) by its first bytes"
-        raise InvalidNetworkSourceError(str(path), msg)
-    return osmium.io.File(str(path), fmt)
+        return "osm.bz2"
+    if head.startswith(b"\x1f\x8b"):
+        return "osm.gz"
+    if b"OSMHeader" in head:
+        return "pbf"
+    if head.lstrip().startswith(b"<"):
+        return "osm"
+    msg = "not OSM XML (.osm, .osm.bz2, .osm.gz) nor PBF (.osm.pbf) by its first bytes"
+    raise InvalidNetworkSourceError(str(path), msg)
+
+
+#: libosmium's location of a node missing from the file (``osmium::Location`` undefined).
+_UNDEFINED = 2147483647
+#: libosmium's fixed-point coordinates: degrees times this.
+_PRECISION = 10_000_000
+#: What libosmium's XML parser reads as a coordinate (no sign but "-", no blanks, no "e+").
+_COORDINATE = re.compile(r"^-?(\d+\.?\d*|\.\d+)([eE]-?\d+)?$")
+_NODE_TAG = re.compile(rb"<node\b[^>]*>")
+_ATTRIBUTE = re.compile(rb"""\b(id|lat|lon)\s*=\s*(?:"([^"]*)"|'([^']*)')""")
+
+
+def _coordinate_problem(attribute: str, text: str) -> str | None:
+    """Why an XML ``lat``/``lon`` text is not a coordinate, or ``None`` if it is one."""
+    limit = 90.0 if attribute == "lat" else 180.0
+    if not _COORDINATE.match(text):
+        return "not a decimal number"
+    value = float(text)
+    if not math.isfinite(value) or abs(value) > limit:
+        return f"outside -{limit:g}..{limit:g} degrees"
+    return None
+
+
+def _xml_lines(path: Path, fmt: str) -> IO[bytes]:
+    if fmt == "osm.bz2":
+        return bz2.open(path, "rb")
+    if fmt == "osm.gz":
+        return gzip.open(path, "rb")  # type: ignore[return-value]  # a GzipFile is an IO[bytes]
+    return path.open("rb")
+
+
+def _node_elements(path: Path, fmt: str) -> Iterator[tuple[int, dict[str, str]]]:
+    """``(line number, {id, lat, lon})`` of every ``<node>`` of an OSM XML file, in order."""
+    with _xml_lines(path, fmt) as handle:
+        pending, first_line = b"", 0
+        for number, line in enumerate(handle, start=1):
+            if pending:
+                line, number = pending + line, first_line
+            start = line.rfind(b"<node")
+            if start >= 0 and line.find(b">", start) < 0:  # the element goes on
+                pending, first_line = line, number
+                continue
+            pending = b""
+            for tag in _NODE_TAG.finditer(line):
+                found = {
+                    m.group(1).decode(): (m.group(2) or m.group(3) or b"").decode(errors="replace")
+                    for m in _ATTRIBUTE.finditer(tag.group(0))
+                }
+                yield number, found
+
+
+def _bad_coordinate(path: Path, fmt: str, node_ids: set[int] | None = None) -> str | None:
+    """
+    Describe the first node whose ``lat``/``lon`` text is not a coordinate.
+
+    Only the nodes of ``node_ids`` are read when given (and the scan stops once all were
+    seen), else every node of the file. ``None`` when every text is a coordinate.
+    """
+    left = set(node_ids) if node_ids is not None else None
+    for number, node in _node_elements(path, fmt):
+        try:
+            node_id = int(node.get("id", ""))
+        except ValueError:
+            continue
+        if left is not None:
+            if node_id not in left:
+                continue
+            left.discard(node_id)
+        for attribute in ("lat", "lon"):
+            text = node.get(attribute, "")
+            problem = _coordinate_problem(attribute, text)
+            if problem:
+                return f'node {node_id} (line {number}) has {attribute}="{text}": {problem}'
+        if left is not None and not left:
+            break
+    return None
+
+
+def _corrupt(path: Path, detail: str) -> InvalidNetworkSourceError:
+    reason = f"{detail}; fix the node or export the extract again"
+    return InvalidNetworkSourceError(str(path), reason)
 
 
 def _runs_of_present_nodes(valid: npt.NDArray[np.bool_]) -> list[tuple[int, int]]:
@@ -131,8 +229,10 @@ def read_osm(path: Path) -> OsmExtract:
     restrictions: list[TurnRestriction] = []
     skipped: Counter[str] = Counter()
     clipped = 0
+    fmt = _format_of(path)
+    on_zero: set[int] = set()  # nodes of roads at exactly 0 degrees, to check in the text
     try:
-        processor = osmium.FileProcessor(_osmium_file(path)).with_locations()
+        processor = osmium.FileProcessor(osmium.io.File(str(path), fmt)).with_locations()
         for obj in processor:
             if isinstance(obj, osmium.osm.Way):
                 tags = obj.tags
@@ -143,13 +243,25 @@ def read_osm(path: Path) -> OsmExtract:
                     continue
                 nodes = obj.nodes
                 ids = np.fromiter((nd.ref for nd in nodes), dtype=np.int64, count=len(nodes))
-                valid = np.fromiter((nd.location.valid() for nd in nodes), bool, len(nodes))
-                lon = np.array(
-                    [nd.lon if ok else np.nan for nd, ok in zip(nodes, valid, strict=True)]
+                xy: npt.NDArray[np.int64] = np.fromiter(
+                    ((loc.x, loc.y) for loc in (nd.location for nd in nodes)),
+                    dtype=np.dtype((np.int64, 2)),
+                    count=len(nodes),
                 )
-                lat = np.array(
-                    [nd.lat if ok else np.nan for nd, ok in zip(nodes, valid, strict=True)]
-                )
+                x, y = xy[:, 0], xy[:, 1]
+                valid = (x != _UNDEFINED) & (y != _UNDEFINED)
+                outside = valid & ((np.abs(x) > 180 * _PRECISION) | (np.abs(y) > 90 * _PRECISION))
+                if outside.any():
+                    i = int(np.argmax(outside))
+                    detail = (
+                        f"node {ids[i]} of way {obj.id} is at lat {y[i] / _PRECISION:g}, "
+                        f"lon {x[i] / _PRECISION:g}: outside -90..90 / -180..180 degrees"
+                    )
+                    raise _corrupt(path, detail)
+                if fmt != "pbf":
+                    on_zero.update(ids[valid & ((x == 0) | (y == 0))].tolist())
+                lon = np.where(valid, x / _PRECISION, np.nan)
+                lat = np.where(valid, y / _PRECISION, np.nan)
                 if valid.all():
                     if len(ids) >= 2:
                         ways.append(OsmWay(obj.id, ids, lon, lat, kept))
@@ -160,12 +272,19 @@ def read_osm(path: Path) -> OsmExtract:
                         OsmWay(obj.id, ids[start:stop], lon[start:stop], lat[start:stop], kept)
                     )
             elif isinstance(obj, osmium.osm.Relation) and obj.tags.get("type") == "restriction":
-                found, reason = _restrictions(obj)
+                found, why = _restrictions(obj)
                 restrictions.extend(found)
-                if reason:
-                    skipped[reason] += 1
+                if why:
+                    skipped[why] += 1
+    except osmium.InvalidLocationError as exc:  # libosmium's XML parser, on a lat/lon text
+        where = _bad_coordinate(path, fmt) if fmt != "pbf" else None
+        raise _corrupt(path, where or f"a node's coordinate is unreadable ({exc})") from exc
     except RuntimeError as exc:
         raise InvalidNetworkSourceError(str(path), str(exc)) from exc
+    if on_zero:
+        read_as_zero = _bad_coordinate(path, fmt, on_zero)
+        if read_as_zero:
+            raise _corrupt(path, f"{read_as_zero} (libosmium read it as 0)")
     return OsmExtract(ways, restrictions, clipped, dict(skipped))
 
 
