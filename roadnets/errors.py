@@ -84,3 +84,17 @@ class NetworkTooWideError(RoadNetworkError, ValueError):
             "and load each part"
         )
         super().__init__(msg)
+
+
+class NetworkReopenError(RoadNetworkError, OSError):
+    """A pickled network cannot be opened again in this process (its cache entry is gone)."""
+
+    def __init__(self, network_id: str, reason: str) -> None:
+        self.network_id, self.reason = network_id, reason
+        msg = (
+            f"road network {network_id!r} cannot be opened again in this process: {reason}; a "
+            "pickled network re-opens from its cache file, so give workers the same cache "
+            "folder and source (a shared disk), or load it with use_cache=False to pickle its "
+            "arrays instead"
+        )
+        super().__init__(msg)

@@ -21,6 +21,7 @@ from roadnets.compile import choose_projector, compile_network
 from roadnets.errors import (
     CacheError,
     InvalidNetworkSourceError,
+    NetworkReopenError,
     NetworkSourceNotFoundError,
     NoDrivableRoadsError,
 )
@@ -31,7 +32,7 @@ from roadnets.projection import Projector
 if TYPE_CHECKING:
     import os
 
-__all__ = ["DEFAULT_NETWORK", "default_network_path", "load", "network_id_of"]
+__all__ = ["DEFAULT_NETWORK", "default_network_path", "load", "network_id_of", "reopen"]
 
 #: File name of the embedded default network (Monaco, OSM 2020-07; ODbL, see data/README.md).
 DEFAULT_NETWORK = "monaco_2020.osm.pbf"
@@ -106,21 +107,9 @@ def load(
         folder = _cache_folder(path, cache_dir)
     digest = file_digest(path)
     if folder is not None:
-        entry = entry_folder(folder, digest)
-        cached = read_entry(entry)
+        cached = _open_entry(path, entry_folder(folder, digest), digest, started)
         if cached is not None:
-            arrays, meta = cached
-            return RoadNetwork(
-                network_id=network_id_of(path),
-                source=str(path),
-                source_sha256=digest,
-                arrays=arrays,
-                projector=Projector(str(meta["crs"])),
-                way_names=_read_way_names(entry),
-                clipped_ways=int(meta["clipped_ways"]),
-                from_cache=True,
-                load_s=time.perf_counter() - started,
-            )
+            return cached
 
     extract = read_osm(path)
     if not extract.ways:
@@ -132,6 +121,7 @@ def load(
         label = way.tags.get("name") or way.tags.get("ref")
         if label:
             way_names[way.way_id] = label
+    entry = None
     if folder is not None:
         entry = entry_folder(folder, digest)
         meta = {
@@ -154,7 +144,57 @@ def load(
         clipped_ways=extract.clipped_ways,
         from_cache=False,
         load_s=time.perf_counter() - started,
+        cache_entry=str(entry) if entry is not None else None,
     )
+
+
+def _open_entry(path: Path, entry: Path, digest: str, started: float) -> RoadNetwork | None:
+    """The network of a cache entry (memory-mapped), ``None`` when it is missing or corrupt."""
+    cached = read_entry(entry)
+    if cached is None:
+        return None
+    arrays, meta = cached
+    return RoadNetwork(
+        network_id=network_id_of(path),
+        source=str(path),
+        source_sha256=digest,
+        arrays=arrays,
+        projector=Projector(str(meta["crs"])),
+        way_names=_read_way_names(entry),
+        clipped_ways=int(meta["clipped_ways"]),
+        from_cache=True,
+        load_s=time.perf_counter() - started,
+        cache_entry=str(entry),
+    )
+
+
+def reopen(network_id: str, source: str, source_sha256: str, cache_entry: str) -> RoadNetwork:
+    """
+    Open a network again from its cache entry, in this process (how a pickle is loaded).
+
+    The entry is memory-mapped as :func:`load` does; when it is gone (the cache was cleared,
+    or this is another machine) the source is compiled again into the same cache folder,
+    provided it is still there with the same content.
+
+    Raises
+    ------
+    NetworkReopenError
+        Neither the entry nor the unchanged source can be read here.
+    """
+    started = time.perf_counter()
+    path, entry = Path(source), Path(cache_entry)
+    net = _open_entry(path, entry, source_sha256, started)
+    if net is None:
+        if not path.is_file():
+            reason = (
+                f"its cache entry {cache_entry!r} and its source are not in this process's reach"
+            )
+            raise NetworkReopenError(network_id, reason)
+        if file_digest(path) != source_sha256:
+            raise NetworkReopenError(network_id, f"its source {source!r} changed since")
+        net = load(path, cache_dir=entry.parent)
+    net.network_id = network_id
+    return net
 
 
 def _cache_folder(path: Path, cache_dir: str | os.PathLike[str] | None) -> Path | None:

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 from dataclasses import dataclass, field
 from functools import cached_property
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import networkx as nx
@@ -19,6 +21,8 @@ from roadnets.spatial import EdgeHits, build_rtree, query_edges
 from roadnets.turns import TurnGraph, build_turn_graph
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from rtree.index import Index
 
     from roadnets.arrays import NetworkArrays
@@ -55,7 +59,7 @@ class NetworkInfo:
         return sum(self.road_km_by_class.values())
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, repr=False)
 class RoadNetwork:
     """
     A compiled, routable, spatially indexed directed road network.
@@ -66,6 +70,17 @@ class RoadNetwork:
     Build one with :func:`roadnets.load`. Planar work happens in :attr:`crs` (a transverse
     Mercator centred on the network, see :mod:`roadnets.projection`); lengths and offsets along
     edges are geodesic; positions given to and returned from users are WGS84 lon/lat.
+
+    Pickling (``multiprocessing``, ``joblib``, ``dask.distributed``): a network that has a cache
+    entry (every :func:`roadnets.load` with ``use_cache=True``) pickles as its id, source, digest
+    and cache entry path, a few hundred bytes; unpickling re-opens (memory-maps) the entry, so
+    every worker on the machine shares one copy of the arrays through the page cache, and the
+    R-tree, turn graph and locks are built again there on first use. Where the entry is gone
+    the worker compiles the unchanged source again into the same cache folder
+    (:func:`roadnets.loader.reopen`; :class:`~roadnets.errors.NetworkReopenError` when it cannot).
+    A network without an entry (``use_cache=False``, :func:`roadnets.from_graph`) pickles its
+    arrays instead (about the size of its cache entry). Tables made by :meth:`precompute_paths`
+    and :meth:`precompute_routes` travel with the pickle.
     """
 
     network_id: str
@@ -73,14 +88,34 @@ class RoadNetwork:
     source_sha256: str
     arrays: NetworkArrays
     projector: Projector
-    way_names: dict[int, str] = field(repr=False)
+    way_names: dict[int, str]
     clipped_ways: int = 0
     from_cache: bool = False
     load_s: float = 0.0
-    precomputed: PathTable | None = field(default=None, repr=False)
+    #: The cache entry folder the arrays were read from or written to (``None``: not cached).
+    cache_entry: str | None = None
+    precomputed: PathTable | None = None
     precomputed_bound_m: float = 0.0
-    precomputed_routes: RouteTable | None = field(default=None, repr=False)
-    _rtree_lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    precomputed_routes: RouteTable | None = None
+    _rtree_lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def __repr__(self) -> str:
+        a = self.arrays
+        lon0, lat0, lon1, lat1 = self.bbox
+        return (
+            f"<RoadNetwork {self.network_id!r} from {Path(self.source).name!r}: "
+            f"{a.n_nodes:,} nodes, {a.n_edges:,} edges, crs {self.projector.label}, "
+            f"bbox ({lon0:.5f}, {lat0:.5f}, {lon1:.5f}, {lat1:.5f})"
+            f"{', cached' if self.cache_entry else ''}>"
+        )
+
+    def __reduce__(self) -> tuple[Callable[[dict[str, Any]], RoadNetwork], tuple[dict[str, Any]]]:
+        keep: tuple[str, ...] = ("precomputed", "precomputed_bound_m", "precomputed_routes")
+        if self.cache_entry is not None:
+            keep = ("network_id", "source", "source_sha256", "cache_entry", *keep)
+        else:
+            keep = tuple(f.name for f in dataclasses.fields(self) if f.name != "_rtree_lock")
+        return _unpickle, ({name: getattr(self, name) for name in keep},)
 
     @property
     def crs(self) -> str:
@@ -417,3 +452,15 @@ class RoadNetwork:
                 geometry=LineString(np.column_stack((a.geom_x[lo:hi], a.geom_y[lo:hi]))),
             )
         return G
+
+
+def _unpickle(state: dict[str, Any]) -> RoadNetwork:
+    """Rebuild a pickled :class:`RoadNetwork` (see its docstring)."""
+    if "arrays" in state:
+        return RoadNetwork(**state)
+    from roadnets.loader import reopen
+
+    net = reopen(state["network_id"], state["source"], state["source_sha256"], state["cache_entry"])
+    net.precomputed, net.precomputed_bound_m = state["precomputed"], state["precomputed_bound_m"]
+    net.precomputed_routes = state["precomputed_routes"]
+    return net

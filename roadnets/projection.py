@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import functools
 import math
+import re
 import threading
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -57,6 +58,8 @@ FloatArray = npt.NDArray[np.float64]
 
 #: Largest planar scale error accepted anywhere on a network (0.1 %).
 MAX_SCALE_ERROR = 1e-3
+
+_TMERC = re.compile(r"^\+proj=tmerc \+lat_0=(?P<lat>\S+) \+lon_0=(?P<lon>\S+) \+k_0=1 ")
 
 #: Mean Earth radius (IUGG), metres: for the scale-error estimate only.
 EARTH_RADIUS_M = 6_371_008.8
@@ -185,6 +188,21 @@ class Projector:
             "+ellps=WGS84 +units=m +no_defs +type=crs"
         )
         return cls(definition)
+
+    @property
+    def label(self) -> str:
+        """
+        A short name of the CRS: ``tmerc(lon_0, lat_0)`` for :meth:`local` ones.
+
+        Examples
+        --------
+        >>> Projector.local(7.42, 43.73).label
+        'tmerc(7.420000, 43.730000)'
+        >>> Projector("EPSG:32632").label
+        'EPSG:32632'
+        """
+        found = _TMERC.match(self.crs)
+        return f"tmerc({found['lon']}, {found['lat']})" if found else self.crs
 
     def forward(self, lon: FloatArray, lat: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Project lon/lat degrees to x/y metres."""
