@@ -36,8 +36,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from mapmatch.accuracy import add_arguments, run_cli  # noqa: E402
 from mapmatch.errors import MapMatchError  # noqa: E402
+from mapmatch.evaluation.accuracy import add_arguments, run_cli  # noqa: E402
 
 
 def main() -> int:

@@ -73,7 +73,7 @@ def main() -> int:
         return _child(args)
 
     import roadnets
-    from mapmatch.simulate import SimulationConfig, simulate_trips, write_trips
+    from mapmatch.evaluation.simulate import SimulationConfig, simulate_trips, write_trips
 
     work = Path(tempfile.mkdtemp(prefix="bench-batch-"))
     cache_dir = work / "cache"

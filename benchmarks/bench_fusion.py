@@ -28,6 +28,7 @@ import numpy as np
 
 import roadnets
 from mapmatch.errors import NoCandidatesError
+from mapmatch.evaluation.simulate import SimulationConfig, simulate_trip
 from mapmatch.fusion import (
     FusedTrack,
     FusionConfig,
@@ -45,7 +46,6 @@ from mapmatch.fusion import (
     straight,
     turn,
 )
-from mapmatch.simulate import SimulationConfig, simulate_trip
 
 ORIGIN = (116.40, 39.90)
 

@@ -33,8 +33,8 @@ sys.path.insert(0, str(ROOT))
 
 import mapmatch  # noqa: E402
 import roadnets  # noqa: E402
-from mapmatch.benchmark import bench_network, markdown_table  # noqa: E402
-from mapmatch.simulate import SimulationConfig, simulate_trip  # noqa: E402
+from mapmatch.evaluation.benchmark import bench_network, markdown_table  # noqa: E402
+from mapmatch.evaluation.simulate import SimulationConfig, simulate_trip  # noqa: E402
 
 SHARED = ROOT.parent / "shared" / "data" / "osm"
 SETS = [(1.0, 5.0), (5.0, 8.0), (30.0, 20.0)]

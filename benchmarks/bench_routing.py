@@ -7,7 +7,7 @@ Default extracts: Monaco and Andorra from ../shared/data/osm (else the embedded 
 Bayfront from tests/data (via-way restrictions).
 
 1. Matcher-like work: simulated traces (1 s / 5 m, 5 s / 8 m, 30 s / 20 m, 2 % outliers), the
-   candidates ``mapmatch.candidates.find_candidates`` gives each fix with the default
+   candidates ``mapmatch.hmm.candidates.find_candidates`` gives each fix with the default
    ``MatchConfig``, every candidate pair of consecutive fixes, bound ``2 x great-circle +
    300 m`` per step. CPU time summed over the traces, best of ``--repeats``:
    ``node``: one bounded node Dijkstra per distinct end node of the ``from`` edges, then the
@@ -39,9 +39,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import roadnets  # noqa: E402
-from mapmatch.candidates import find_candidates  # noqa: E402
 from mapmatch.config import MatchConfig  # noqa: E402
-from mapmatch.simulate import SimulationConfig, simulate_trips  # noqa: E402
+from mapmatch.evaluation.simulate import SimulationConfig, simulate_trips  # noqa: E402
+from mapmatch.hmm.candidates import find_candidates  # noqa: E402
 from roadnets.routing import shortest_path_table  # noqa: E402
 
 if TYPE_CHECKING:

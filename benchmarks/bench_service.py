@@ -34,7 +34,7 @@ import httpx
 import numpy as np
 
 import roadnets
-from mapmatch.simulate import SimulationConfig, simulate_trips
+from mapmatch.evaluation.simulate import SimulationConfig, simulate_trips
 
 if TYPE_CHECKING:
     from collections.abc import Iterator

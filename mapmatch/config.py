@@ -268,7 +268,7 @@ class MatchConfig:
     loop_penalty: float = _param(
         6.0,
         doc="a loop or a drive back after a U-turn must explain its fixes this much better "
-        "than holding where it began (priced after Viterbi; see mapmatch.loops)",
+        "than holding where it began (priced after Viterbi; see mapmatch.hmm.loops)",
         unit="nats",
         ge=0,
         le=1000,

@@ -21,7 +21,7 @@ import numpy as np
 
 import mapmatch
 import roadnets
-from mapmatch.simulate import SimulationConfig, simulate_trip
+from mapmatch.evaluation.simulate import SimulationConfig, simulate_trip
 from mapmatch.viz import match_figure, match_map
 from mapmatch.viz.browser import find_chromium, screenshot
 

@@ -8,8 +8,8 @@ import os
 from typing import TYPE_CHECKING, Any
 
 import roadnets
-from mapmatch.accuracy import add_arguments, run_cli
-from mapmatch.benchmark import bench_network, markdown_table, parse_sets
+from mapmatch.evaluation.accuracy import add_arguments, run_cli
+from mapmatch.evaluation.benchmark import bench_network, markdown_table, parse_sets
 
 if TYPE_CHECKING:
     import argparse

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 import roadnets
 from mapmatch.config import MatchConfig
 from mapmatch.errors import TraceFileError
-from mapmatch.evaluate import TripScore, score_geojson, summarise
+from mapmatch.evaluation.scoring import TripScore, score_geojson, summarise
 from mapmatch.matcher import match
 from mapmatch.trace import read_traces
 

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from mapmatch.batch import BatchOptions, BatchReport, run_batch
-from mapmatch.batch_outputs import FORMATS, SUMMARY_NAME
+from mapmatch.batch.outputs import FORMATS, SUMMARY_NAME
 from mapmatch.config import MatchConfig, add_config_flags, config_from_flags
 
 if TYPE_CHECKING:
@@ -26,7 +26,7 @@ if TYPE_CHECKING:
 
     from tqdm import tqdm
 
-    from mapmatch.batch_outputs import SummaryRow
+    from mapmatch.batch.outputs import SummaryRow
 
 __all__ = ["add_parser", "run"]
 

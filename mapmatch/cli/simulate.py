@@ -6,7 +6,12 @@ import time
 from typing import TYPE_CHECKING, Any
 
 import roadnets
-from mapmatch.simulate import INPUT_CLASSES, SimulationConfig, simulate_trips, write_trips
+from mapmatch.evaluation.simulate import (
+    INPUT_CLASSES,
+    SimulationConfig,
+    simulate_trips,
+    write_trips,
+)
 
 if TYPE_CHECKING:
     import argparse

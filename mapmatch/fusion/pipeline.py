@@ -2,8 +2,8 @@
 Fusion on real roads: raw logs from simulated drives, and the fuse -> match -> feedback loop.
 
 * :func:`true_trajectory_of` and :func:`simulate_trip_raw_log` turn a random drive on an OSM
-  network (:func:`mapmatch.simulate.simulate_trip`) into the raw GNSS + odometer + gyro log
-  a car would have recorded, with its truth; :func:`write_raw_logs` writes them to files.
+  network (:func:`mapmatch.evaluation.simulate.simulate_trip`) into the raw GNSS + odometer +
+  gyro log a car would have recorded, with its truth; :func:`write_raw_logs` writes them to files.
 * :func:`fuse_and_match` fuses a raw log, matches the fused trace, feeds the matched road
   positions back to the filter (:func:`~mapmatch.fusion.road.road_feedback_from_match`),
   fuses again and matches again.
@@ -33,12 +33,12 @@ if TYPE_CHECKING:
 
     from mapmatch.config import MatchConfig
     from mapmatch.distance import DistanceCheck
+    from mapmatch.evaluation.simulate import SimulatedTrip
     from mapmatch.fusion.config import FusionConfig
     from mapmatch.fusion.feedback import RoadFeedback
     from mapmatch.fusion.rawlog import RawLog
     from mapmatch.fusion.track import FusedTrack
     from mapmatch.result import MatchResult
-    from mapmatch.simulate import SimulatedTrip
     from roadnets import RoadNetwork
 
 __all__ = [
@@ -73,7 +73,7 @@ def true_trajectory_of(trip: SimulatedTrip) -> TrueTrajectory:
     Parameters
     ----------
     trip
-        A trip from :func:`mapmatch.simulate.simulate_trip` (its ``dense_*`` arrays).
+        A trip from :func:`mapmatch.evaluation.simulate.simulate_trip` (its ``dense_*`` arrays).
 
     Returns
     -------
@@ -102,7 +102,7 @@ def simulate_trip_raw_log(
     Parameters
     ----------
     trip
-        A trip from :func:`mapmatch.simulate.simulate_trip`.
+        A trip from :func:`mapmatch.evaluation.simulate.simulate_trip`.
     config
         Sensor error model: HDOP, bad fixes, multipath jumps, outages (seconds after the
         trip's start), odometer scale and gyro errors.
@@ -178,7 +178,7 @@ def write_raw_logs(
     Parameters
     ----------
     trips
-        Trips from :func:`mapmatch.simulate.simulate_trips`.
+        Trips from :func:`mapmatch.evaluation.simulate.simulate_trips`.
     out_dir
         Folder to write into (created if missing).
     config

@@ -36,8 +36,8 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 import pandas as pd
 
-from mapmatch.chinacrs import bd09_to_wgs84, gcj02_to_wgs84
 from mapmatch.fusion.errors import NoGnssFixError, RawLogError, RawLogNotFoundError
+from mapmatch.trace.chinacrs import bd09_to_wgs84, gcj02_to_wgs84
 
 if TYPE_CHECKING:
     import numpy.typing as npt

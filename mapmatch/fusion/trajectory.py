@@ -2,7 +2,7 @@
 True vehicle trajectories for the raw-log simulator.
 
 :class:`TrueTrajectory` is the contract between whoever makes ground truth (these builders, or
-later random routes on real OSM networks in ``mapmatch.simulate``) and
+later random routes on real OSM networks in ``mapmatch.evaluation.simulate``) and
 :func:`~mapmatch.fusion.simulate_raw_log`. The builders here drive a car along straight and
 circular legs with stops, with bounded acceleration, on a local tangent plane.
 """

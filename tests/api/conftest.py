@@ -25,14 +25,14 @@ import roadnets
 from api.main import create_app
 from api.settings import Settings
 from mapmatch import Trace
-from mapmatch.simulate import SimulationConfig, simulate_trips
+from mapmatch.evaluation.simulate import SimulationConfig, simulate_trips
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
 
     from fastapi import FastAPI
 
-    from mapmatch.simulate import SimulatedTrip
+    from mapmatch.evaluation.simulate import SimulatedTrip
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 ROOT = Path(__file__).resolve().parents[2]

@@ -14,7 +14,7 @@ if TYPE_CHECKING:
 
     import httpx
 
-    from mapmatch.simulate import SimulatedTrip
+    from mapmatch.evaluation.simulate import SimulatedTrip
 
 JSON = {"content-type": "application/json"}
 CSV = {"content-type": "text/csv"}

@@ -9,7 +9,7 @@ import pytest
 if TYPE_CHECKING:
     import httpx
 
-    from mapmatch.simulate import SimulatedTrip
+    from mapmatch.evaluation.simulate import SimulatedTrip
 
 
 def _points(doc: dict[str, Any]) -> list[dict[str, Any]]:

@@ -20,7 +20,7 @@ import pytest
 import mapmatch
 import roadnets
 from mapmatch import viz
-from mapmatch.simulate import SimulationConfig, simulate_trip
+from mapmatch.evaluation.simulate import SimulationConfig, simulate_trip
 from mapmatch.viz.data import (
     CONFIDENCE_COLOURS,
     MARK_COLOURS,

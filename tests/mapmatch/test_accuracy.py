@@ -9,7 +9,10 @@ from typing import TYPE_CHECKING
 
 import pytest
 
-from mapmatch.accuracy import (
+from mapmatch.cli import main
+from mapmatch.config import MatchConfig
+from mapmatch.errors import ConfigError
+from mapmatch.evaluation.accuracy import (
     CONDITIONS,
     TRUTH_SUBSETS,
     CellTask,
@@ -23,10 +26,7 @@ from mapmatch.accuracy import (
     run_cell,
     truth_tasks,
 )
-from mapmatch.cli import main
-from mapmatch.config import MatchConfig
-from mapmatch.errors import ConfigError
-from mapmatch.simulate import INPUT_CLASSES, SimulationConfig
+from mapmatch.evaluation.simulate import INPUT_CLASSES, SimulationConfig
 
 if TYPE_CHECKING:
     from pathlib import Path

@@ -18,9 +18,9 @@ from typing import TYPE_CHECKING
 import pandas as pd
 import pytest
 
-from mapmatch.batch_outputs import SUMMARY_COLUMNS, read_summary
+from mapmatch.batch.outputs import SUMMARY_COLUMNS, read_summary
 from mapmatch.cli import main as cli_main
-from mapmatch.simulate import SimulationConfig, simulate_trips
+from mapmatch.evaluation.simulate import SimulationConfig, simulate_trips
 
 if TYPE_CHECKING:
     from collections.abc import Iterator

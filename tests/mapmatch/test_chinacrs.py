@@ -3,7 +3,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mapmatch.chinacrs import (
+from mapmatch.trace.chinacrs import (
     bd09_to_gcj02,
     bd09_to_wgs84,
     gcj02_to_bd09,

@@ -11,8 +11,8 @@ import pytest
 
 import mapmatch
 from mapmatch.cli import main
-from mapmatch.evaluate import TripScore, count_turnbacks, score_geojson, summarise
-from mapmatch.simulate import SimulationConfig, simulate_trip, write_trips
+from mapmatch.evaluation.scoring import TripScore, count_turnbacks, score_geojson, summarise
+from mapmatch.evaluation.simulate import SimulationConfig, simulate_trip, write_trips
 
 if TYPE_CHECKING:
     from pathlib import Path

@@ -5,16 +5,9 @@ import pytest
 
 from mapmatch.config import MatchConfig
 from mapmatch.errors import ConfigError
-from mapmatch.models import (
-    ROUTE_SAME_EDGE,
-    ROUTE_UTURN,
-    ROUTE_VIA_GRAPH,
-    candidate_pairs,
-    heading_weight,
-    log_emission,
-    log_heading,
-    log_transition,
-)
+from mapmatch.hmm.emission import heading_weight, log_emission, log_heading
+from mapmatch.hmm.routes import ROUTE_SAME_EDGE, ROUTE_UTURN, ROUTE_VIA_GRAPH, candidate_pairs
+from mapmatch.hmm.transition import log_transition
 
 
 def test_emission_is_gaussian_in_distance() -> None:

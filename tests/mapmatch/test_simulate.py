@@ -11,7 +11,7 @@ import mapmatch
 import roadnets
 from mapmatch.cli import main
 from mapmatch.errors import ConfigError
-from mapmatch.simulate import (
+from mapmatch.evaluation.simulate import (
     INPUT_CLASSES,
     TRUE_COLUMNS,
     SimulatedTrip,

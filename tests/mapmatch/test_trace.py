@@ -9,14 +9,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mapmatch import chinacrs
 from mapmatch.errors import (
     InvalidTraceError,
     MapMatchError,
     NoCandidatesError,
     TraceFileError,
 )
-from mapmatch.trace import UERE_M, Trace, TraceReport
+from mapmatch.trace import UERE_M, Trace, TraceReport, chinacrs
 
 LON = [7.4200, 7.4201, 7.4202, 7.4203]
 LAT = [43.7300, 43.7301, 43.7302, 43.7303]

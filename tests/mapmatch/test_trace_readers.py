@@ -10,7 +10,7 @@ import pytest
 
 from mapmatch.errors import InvalidTraceError, TraceFileError
 from mapmatch.trace import Trace, read_traces
-from mapmatch.trace_readers import infer_format
+from mapmatch.trace.readers import infer_format
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "traces"
 T0 = 1714550400.0  # 2024-05-01T08:00:00Z

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mapmatch.viterbi import posteriors, viterbi
+from mapmatch.hmm.viterbi import posteriors, viterbi
 
 
 @dataclass

@@ -12,7 +12,7 @@ import pytest
 import mapmatch
 import roadnets
 from mapmatch import viz
-from mapmatch.simulate import SimulationConfig, simulate_trip
+from mapmatch.evaluation.simulate import SimulationConfig, simulate_trip
 from mapmatch.viz.data import MARK_COLOURS, SEGMENT_COLOURS
 
 matplotlib.use("Agg")

@@ -6,7 +6,6 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mapmatch.chinacrs import wgs84_to_gcj02
 from mapmatch.fusion import (
     TRACE_COLUMNS,
     FusionConfig,
@@ -17,6 +16,7 @@ from mapmatch.fusion import (
     fuse,
     simulate_raw_log,
 )
+from mapmatch.trace.chinacrs import wgs84_to_gcj02
 
 
 @pytest.mark.parametrize("trip", ["city", "arcs", "straight"])

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pytest
 
+from mapmatch.evaluation.simulate import SimulatedTrip, SimulationConfig, simulate_trip
 from mapmatch.fusion import (
     FusedTrack,
     FusionConfig,
@@ -23,7 +24,6 @@ from mapmatch.fusion import (
     true_trajectory_of,
     write_raw_logs,
 )
-from mapmatch.simulate import SimulatedTrip, SimulationConfig, simulate_trip
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -56,7 +56,7 @@ def pick_drive(
     ``driving_s`` is given, that drives at ``min_speed_mps`` on average in that window and
     goes on for 30 s after it (so an outage there happens on the road, not at a red light).
     Choosing by property rather than by a bare seed keeps the tests meaningful when the
-    trip generator of :mod:`mapmatch.simulate` changes.
+    trip generator of :mod:`mapmatch.evaluation.simulate` changes.
     """
     for s in range(seed, seed + 30):
         trip = drive(net, s, route_length_m)

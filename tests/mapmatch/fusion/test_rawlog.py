@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 
 from mapmatch import MapMatchError
-from mapmatch.chinacrs import wgs84_to_bd09, wgs84_to_gcj02
 from mapmatch.fusion import NoGnssFixError, RawLog, RawLogError, RawLogNotFoundError
+from mapmatch.trace.chinacrs import wgs84_to_bd09, wgs84_to_gcj02
 
 
 def _frame(n: int = 5) -> pd.DataFrame:

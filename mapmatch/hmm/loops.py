@@ -20,12 +20,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from mapmatch.models import ROUTE_STANDSTILL, ROUTE_VIA_GRAPH, log_emission, log_transition
+from mapmatch.hmm.emission import distance_emission
+from mapmatch.hmm.routes import ROUTE_STANDSTILL, ROUTE_VIA_GRAPH
+from mapmatch.hmm.transition import log_transition
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
-    from mapmatch.observations import Observations
-    from mapmatch.solution import Solution
+    from mapmatch.hmm.observations import Observations
+    from mapmatch.hmm.solution import Solution
     from roadnets import RoadNetwork
 
 __all__ = ["collapse_loops"]
@@ -172,9 +174,7 @@ def _loop_gain(
     px, py = place
     kk = used[start + inside]
     distance = np.hypot(obs.x[kk] - px, obs.y[kk] - py)
-    em_held = log_emission(distance, sigma_m=obs.sigma_m[kk])
-    if config.max_emission_penalty > 0:
-        em_held = np.logaddexp(em_held, -config.max_emission_penalty)
+    em_held = distance_emission(distance, obs.sigma_m[kk], config)
     # the loop's U-turns cost what they cost in Viterbi, but one at a dead end's end is no
     # choice: the loop into a dead end is priced by loop_penalty alone
     uturns = _free_uturns(net, entries, s0, s1)

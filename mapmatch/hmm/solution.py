@@ -9,8 +9,8 @@ import numpy as np
 import numpy.typing as npt
 
 if TYPE_CHECKING:
-    from mapmatch.candidates import Candidates
-    from roadnets import PathTable
+    from mapmatch.hmm.candidates import Candidates
+    from roadnets import EdgeRoutes
 
 __all__ = ["Solution"]
 
@@ -25,7 +25,7 @@ class Solution:
 
     ``states`` is the chosen candidate rank of each used fix (-1: none); ``pieces`` are
     ``(start, stop)`` ranges of *used* positions; ``kinds`` the route kind of every padded
-    transition; ``table`` the shortest paths the transitions were routed on.
+    transition; ``routes`` the routes the transitions were scored on (their edges).
     """
 
     used: IntArray
@@ -34,7 +34,7 @@ class Solution:
     pieces: list[tuple[int, int]]
     post: FloatArray
     kinds: IntArray
-    table: PathTable
+    routes: EdgeRoutes
     log_emission: FloatArray
     log_transition: FloatArray
 

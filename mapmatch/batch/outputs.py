@@ -351,7 +351,7 @@ def write_result(result: MatchResult, out_dir: Path, name: str, fmt: str) -> Non
     out_dir
         Output folder (exists).
     name
-        Output name without suffix (from :func:`~mapmatch.batch_inputs.assign_output_names`).
+        Output name without suffix (from :func:`~mapmatch.batch.inputs.assign_output_names`).
     fmt
         ``geojson``, ``csv`` or ``parquet``.
     """

@@ -1,7 +1,7 @@
 """
 The accuracy matrix: how well the matched *length* holds up, whatever the input.
 
-Every extract x input class (:data:`mapmatch.simulate.INPUT_CLASSES`: positions only, +
+Every extract x input class (:data:`mapmatch.evaluation.simulate.INPUT_CLASSES`: positions only, +
 accuracy, + heading & speed, + odometer) x condition (:data:`CONDITIONS`: clean 1 s / 15 s /
 30 s, and realistic 1 s / 15 s noise with a 2 % high odometer). The same simulated trips (fixed
 seeds) feed every input class of a condition, stripped to that class's columns. Per cell: route
@@ -36,12 +36,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 import roadnets
-from mapmatch.batch_executors import make_executor
+from mapmatch.batch.executors import make_executor
 from mapmatch.config import MatchConfig
 from mapmatch.errors import ConfigError, MapMatchError
-from mapmatch.evaluate import TripScore, score_geojson, summarise
-from mapmatch.matcher import match
-from mapmatch.simulate import (
+from mapmatch.evaluation.scoring import TripScore, score_geojson, summarise
+from mapmatch.evaluation.simulate import (
     INPUT_CLASSES,
     TRUE_COLUMNS,
     SimulatedTrip,
@@ -50,6 +49,7 @@ from mapmatch.simulate import (
     with_columns,
     write_trips,
 )
+from mapmatch.matcher import match
 
 if TYPE_CHECKING:
     import argparse
@@ -78,7 +78,7 @@ __all__ = [
 ]
 
 _log = logging.getLogger("mapmatch")
-_ROOT = Path(__file__).resolve().parents[1]
+_ROOT = Path(__file__).resolve().parents[2]  # the repository (mapmatch/evaluation/../..)
 SHARED_EXTRACTS = _ROOT.parent / "shared" / "data" / "osm"
 TEST_EXTRACTS = _ROOT / "tests" / "data"
 _QUICK = ("monaco_2020", "helsinki_center_2019")
@@ -461,7 +461,7 @@ def run_tasks(
     RuntimeError
         A task failed outside the matcher (a network that does not load ...).
     """
-    executor = make_executor(workers, None, preload=["mapmatch.accuracy"])
+    executor = make_executor(workers, None, preload=["mapmatch.evaluation.accuracy"])
     done: dict[int, list[TripRow]] = {}
     position = {id(t): i for i, t in enumerate(tasks)}
     started = time.perf_counter()

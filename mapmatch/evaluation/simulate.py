@@ -10,7 +10,6 @@ and speed with their own noise, and an odometer with a small scale error.
 from __future__ import annotations
 
 import dataclasses
-import heapq
 import json
 import math
 from dataclasses import dataclass
@@ -21,7 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from mapmatch.errors import ConfigError
-from mapmatch.evaluate import count_turnbacks
+from mapmatch.evaluation.scoring import count_turnbacks
 from mapmatch.trace import Trace
 
 if TYPE_CHECKING:
@@ -405,8 +404,9 @@ class SimulatedTrip:
     ``edges`` the driven route from the first fix to the last and ``length_m`` its length.
     ``stops``, ``outages`` and ``canyons`` list those stretches of the trip;
     ``uturns`` and ``loops`` count the true route's own U-turns (only at dead ends) and
-    directed edges driven more than once, as :func:`mapmatch.evaluate.count_turnbacks` counts
-    them on a match, so a benchmark can tell a spurious one from a driven one.
+    directed edges driven more than once, as
+    :func:`mapmatch.evaluation.scoring.count_turnbacks` counts them on a match, so a
+    benchmark can tell a spurious one from a driven one.
     """
 
     trace: Trace
@@ -469,32 +469,68 @@ class SimulatedTrip:
 
 
 def _random_route(net: RoadNetwork, rng: np.random.Generator, length_m: float) -> list[int] | None:
-    """Edges of a random drive of about ``length_m``; ``None`` if it got stuck at once."""
+    """
+    Edges of a random drive of about ``length_m``; ``None`` if it got stuck at once.
+
+    At every junction a legal move (the router's turn graph: every restriction obeyed, via-way
+    ones included) is drawn, straight on preferred, U-turns only where nothing else is left,
+    the edges of the last 30 moves avoided where possible.
+    """
     a = net.arrays
     weights = a.edge_length_m / a.edge_length_m.sum()
-    edge = int(rng.choice(a.n_edges, p=weights))
-    banned = set(zip(a.banned_in.tolist(), a.banned_out.tolist(), strict=True))
-    route = [edge]
-    total = float(a.edge_length_m[edge])
+    state = int(rng.choice(a.n_edges, p=weights))
+    route = [state]
+    total = float(a.edge_length_m[state])
     while total < length_m and len(route) < 10_000:
-        node = int(a.edge_v[edge])
-        outs = [
-            int(e)
-            for e in a.out_edge[a.out_ptr[node] : a.out_ptr[node + 1]]
-            if (edge, int(e)) not in banned
-        ]
-        forward = [e for e in outs if e != a.edge_twin[edge]]
+        states, edges = net.turns.successors(state)
+        edge = route[-1]
+        forward = [i for i, e in enumerate(edges.tolist()) if e != a.edge_twin[edge]]
         recent = set(route[-30:])
-        fresh = [e for e in forward if e not in recent]
-        options = fresh or forward or outs
+        fresh = [i for i in forward if int(edges[i]) not in recent]
+        options = fresh or forward or list(range(len(edges)))
         if not options:
             break
-        turn = np.array([_turn_deg(net, edge, e) for e in options])
+        turn = np.array([_turn_deg(net, edge, int(edges[i])) for i in options])
         preference = np.exp(-turn / 45.0) + 0.05
-        edge = int(options[int(rng.choice(len(options), p=preference / preference.sum()))])
-        route.append(edge)
-        total += float(a.edge_length_m[edge])
+        pick = options[int(rng.choice(len(options), p=preference / preference.sum()))]
+        state = int(states[pick])
+        route.append(int(edges[pick]))
+        total += float(a.edge_length_m[route[-1]])
     return route if total >= min(length_m, 200.0) else None
+
+
+def _turn_costs_s(net: RoadNetwork) -> FloatArray:
+    """
+    Search cost of every legal move of the turn graph for the fastest route, seconds.
+
+    5 s for a turn of more than 45 degrees; a U-turn costs more than any trip (so routes
+    never turn round) except at a dead end, where it is the only way on; even there it costs
+    60 s, so a route turns in a dead end only when it must (it started into one), not to
+    avoid a banned turn, as drivers go round the block instead.
+    """
+    a = net.arrays
+    into, out = net.turns.transition_edges()
+    end_dx, end_dy, start_dx, start_dy = _edge_end_directions(net)
+    bearing_in = np.degrees(np.arctan2(end_dx[into], end_dy[into]))
+    bearing_out = np.degrees(np.arctan2(start_dx[out], start_dy[out]))
+    turn = np.abs((bearing_out - bearing_in + 180.0) % 360.0 - 180.0)
+    cost = np.where(turn > 45.0, 5.0, 0.0)
+    node = a.edge_v[into]
+    dead_end = (a.out_ptr[node + 1] - a.out_ptr[node]) <= 1
+    uturn = a.edge_twin[into] == out
+    return np.where(uturn, np.where(dead_end, 60.0, 1e7), cost)
+
+
+def _edge_end_directions(net: RoadNetwork) -> tuple[FloatArray, ...]:
+    """Direction vectors of every edge's last and first geometry segment (metres)."""
+    a = net.arrays
+    lo, hi = a.edge_geom_ptr[:-1], a.edge_geom_ptr[1:]
+    return (
+        a.geom_x[hi - 1] - a.geom_x[hi - 2],
+        a.geom_y[hi - 1] - a.geom_y[hi - 2],
+        a.geom_x[lo + 1] - a.geom_x[lo],
+        a.geom_y[lo + 1] - a.geom_y[lo],
+    )
 
 
 def _fastest_route(
@@ -503,54 +539,38 @@ def _fastest_route(
     """
     The fastest route from a random edge to a random edge about ``length_m`` of road away.
 
-    Free-flow time plus 5 s per turn of more than 45 degrees, banned turns obeyed, no U-turn
-    but at a dead end. ``None`` when no edge that far can be reached; with ``allow_short``
-    (a network too small for that length) the farthest reachable edge instead, unless even
-    that is closer than ``min(0.3 * length_m, 200 m)``.
+    Found by the network's router (:meth:`~roadnets.RoadNetwork.route_table`), the one the
+    matcher routes with, on free-flow time plus 5 s per turn of more than 45 degrees, every
+    turn restriction obeyed, no U-turn but at a dead end. ``None`` when no edge that far can
+    be reached; with ``allow_short`` (a network too small for that length) the farthest
+    reachable edge instead, unless even that is closer than ``min(0.3 * length_m, 200 m)``.
     """
     a = net.arrays
     weights = a.edge_length_m / a.edge_length_m.sum()
     start = int(rng.choice(a.n_edges, p=weights))
-    banned = set(zip(a.banned_in.tolist(), a.banned_out.tolist(), strict=True))
     time_s = a.edge_length_m / a.edge_speed_mps
-    best: dict[int, float] = {start: 0.0}
-    road: dict[int, float] = {start: float(a.edge_length_m[start])}
-    previous: dict[int, int] = {}
-    heap = [(0.0, start)]
-    limit = 1.6 * length_m
-    while heap:
-        cost, edge = heapq.heappop(heap)
-        if cost > best.get(edge, np.inf) or road[edge] > limit:
-            continue
-        node = int(a.edge_v[edge])
-        outs = [
-            int(e)
-            for e in a.out_edge[a.out_ptr[node] : a.out_ptr[node + 1]]
-            if (edge, int(e)) not in banned
-        ]
-        forward = [e for e in outs if e != a.edge_twin[edge]] or outs
-        for nxt in forward:
-            turn = 5.0 if _turn_deg(net, edge, nxt) > 45.0 else 0.0
-            new = cost + float(time_s[nxt]) + turn
-            if new < best.get(nxt, np.inf):
-                best[nxt] = new
-                road[nxt] = road[edge] + float(a.edge_length_m[nxt])
-                previous[nxt] = edge
-                heapq.heappush(heap, (new, nxt))
-    ends = [e for e, r in road.items() if 0.7 * length_m <= r <= 1.3 * length_m]
-    if ends:
-        edge = ends[int(rng.integers(len(ends)))]
-    elif allow_short:  # a small network: the farthest place the start can reach, if far enough
-        edge = max(road, key=road.__getitem__)
-        if road[edge] < min(0.3 * length_m, 200.0):
+    slowest = float(a.edge_speed_mps.min())
+    bound_s = 1.6 * length_m / slowest + 5.0 * 1.6 * length_m / 20.0  # beyond 1.6 x length
+    table = net.route_table(
+        np.array([start]),
+        bound_s,
+        uturn_cost_m=0.0,
+        edge_cost=time_s,
+        turn_cost=_turn_costs_s(net),
+    )
+    records = np.arange(int(table.ptr[0]), int(table.ptr[1]))
+    edges = net.turns.state_edge[table.state[records]].astype(np.int64)
+    road = a.edge_length_m[start] + table.distance_m[records] + a.edge_length_m[edges]
+    fine = (road >= 0.7 * length_m) & (road <= 1.3 * length_m) & (edges != start)
+    if fine.any():
+        pick = int(rng.choice(np.flatnonzero(fine)))
+    elif allow_short and len(records):  # a small network: the farthest place the start reaches
+        pick = int(np.argmax(road))
+        if road[pick] < min(0.3 * length_m, 200.0):
             return None
     else:
         return None
-    route = [edge]
-    while edge != start:
-        edge = previous[edge]
-        route.append(edge)
-    return route[::-1]
+    return [start, *table.path(int(records[pick])), int(edges[pick])]
 
 
 def _edge_bearing(net: RoadNetwork, edge: int, at_end: bool) -> float:
@@ -570,17 +590,23 @@ def _turn_deg(net: RoadNetwork, into: int, out: int) -> float:
 def _route_polyline(
     net: RoadNetwork, route: list[int]
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """x, y and cumulative distance of the route's vertices, and each edge's start distance."""
-    xs, ys = [], []
+    """
+    x, y and distance along the route of its vertices, in the network's own measure.
+
+    Distances are the edges' own vertex offsets (``geom_cum_m``, true lengths) added up, so a
+    place on the route maps to an edge offset exactly as the network measures it.
+    """
+    a = net.arrays
+    xs, ys, ss = [], [], []
+    base = 0.0
     for i, e in enumerate(route):
-        x, y = net.edge_polyline(e, 0.0, float(net.arrays.edge_length_m[e]))
-        if i:
-            x, y = x[1:], y[1:]
-        xs.append(x)
-        ys.append(y)
-    x, y = np.concatenate(xs), np.concatenate(ys)
-    s = np.concatenate(([0.0], np.cumsum(np.hypot(np.diff(x), np.diff(y)))))
-    return x, y, s
+        lo, hi = int(a.edge_geom_ptr[e]), int(a.edge_geom_ptr[e + 1])
+        first = lo if i == 0 else lo + 1
+        xs.append(a.geom_x[first:hi])
+        ys.append(a.geom_y[first:hi])
+        ss.append(base + a.geom_cum_m[first:hi])
+        base += float(a.edge_length_m[e])
+    return np.concatenate(xs), np.concatenate(ys), np.concatenate(ss)
 
 
 def _speed_profile(

@@ -1,4 +1,4 @@
-"""Which fixes enter the HMM: outliers and near-duplicates of a stopped car are left out."""
+"""Which observations enter the HMM: displaced ones (outliers, bursts of multipath) are left out."""
 
 from __future__ import annotations
 
@@ -6,12 +6,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
-from numba import njit
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
+    from mapmatch.hmm.candidates import Candidates
+    from mapmatch.hmm.fixes import Fixes
+    from mapmatch.hmm.observations import Observations
 
-__all__ = ["find_off_road_runs", "find_outliers", "thin_fixes"]
+__all__ = ["find_displaced", "find_off_road_runs", "find_outliers"]
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
@@ -82,42 +84,6 @@ def find_outliers(
     return out
 
 
-@njit(cache=True, nogil=True)
-def _thin_kernel(x, y, radius, index, keep):  # type: ignore[no-untyped-def]  # pragma: no cover
-    last = index[0]
-    for k in range(1, len(index) - 1):
-        i = index[k]
-        if np.hypot(x[i] - x[last], y[i] - y[last]) < radius[i]:
-            keep[i] = False
-        else:
-            last = i
-
-
-def thin_fixes(
-    x: FloatArray, y: FloatArray, sigma_m: FloatArray, usable: BoolArray, config: MatchConfig
-) -> BoolArray:
-    """
-    Usable fixes to keep: each at least ``thinning_sigmas`` x sigma from the last kept one.
-
-    The first and last usable fixes are always kept.
-
-    Examples
-    --------
-    >>> from mapmatch.config import MatchConfig
-    >>> x = np.array([0.0, 3.0, 6.0, 20.0, 22.0])
-    >>> keep = thin_fixes(x, np.zeros(5), np.full(5, 5.0), np.ones(5, bool), MatchConfig())
-    >>> keep.tolist()
-    [True, False, False, True, True]
-    """
-    keep = usable.copy()
-    index = np.flatnonzero(usable)
-    if config.thinning_sigmas <= 0 or len(index) <= 2:
-        return keep
-    radius = config.thinning_sigmas * np.asarray(sigma_m, dtype=np.float64)
-    _thin_kernel(np.asarray(x, np.float64), np.asarray(y, np.float64), radius, index, keep)
-    return keep
-
-
 def find_off_road_runs(
     nearest_m: FloatArray, sigma_m: FloatArray, gap_s: FloatArray, config: MatchConfig
 ) -> BoolArray:
@@ -156,3 +122,32 @@ def find_off_road_runs(
         if on_road[start - 1] and on_road[stop] and bool(short[start - 1 : stop].all()):
             out[start:stop] = True
     return out
+
+
+def find_displaced(
+    fixes: Fixes, obs: Observations, cands: Candidates, config: MatchConfig
+) -> BoolArray:
+    """
+    Displaced observations, judged among those near a road.
+
+    Short runs far from every road between observations on a road are displaced
+    (:func:`find_off_road_runs`). Then each is compared with where its neighbours put it
+    (:func:`find_outliers`); of two displaced ones in a row only the worse is caught at first,
+    so that test runs again without the ones found, up to three times.
+    """
+    near = np.flatnonzero(cands.counts > 0)
+    nearest = np.full(len(obs), np.inf)
+    nearest[near] = cands.distance_m[cands.ptr[near]]  # rows of a fix are nearest first
+    gaps = fixes.time_s[obs.first[1:]] - fixes.time_s[obs.stop[:-1] - 1]
+    outlier = find_off_road_runs(nearest, obs.sigma_m, gaps, config)
+    for _ in range(3):
+        kept = near[~outlier[near]]
+        travel = obs.travel.between(kept) if obs.travel is not None else None
+        gap = fixes.time_s[obs.first[kept[1:]]] - fixes.time_s[obs.stop[kept[:-1]] - 1]
+        found = find_outliers(
+            obs.x[kept], obs.y[kept], obs.time_s[kept], obs.sigma_m[kept], config, travel, gap
+        )
+        if not found.any():
+            break
+        outlier[kept[found]] = True
+    return outlier

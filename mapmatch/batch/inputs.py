@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, BinaryIO
 
 from mapmatch.errors import MapMatchError
-from mapmatch.trace_readers import infer_format, read_raw_traces
+from mapmatch.trace.readers import infer_format, read_raw_traces
 
 if TYPE_CHECKING:
     from collections.abc import Iterable, Sequence

@@ -9,9 +9,9 @@ from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any
 
 from mapmatch.config import MatchConfig
-from mapmatch.evaluate import score_geojson, summarise
+from mapmatch.evaluation.scoring import score_geojson, summarise
+from mapmatch.evaluation.simulate import SimulationConfig, simulate_trips
 from mapmatch.matcher import match
-from mapmatch.simulate import SimulationConfig, simulate_trips
 
 if TYPE_CHECKING:
     from collections.abc import Sequence

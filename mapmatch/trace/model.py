@@ -5,7 +5,7 @@ A :class:`Trace` holds the fused positions of one vehicle as float64 numpy array
 in non-decreasing time order. It is built from arrays (``Trace(time=..., lon=..., lat=...)``),
 a pandas DataFrame or GeoDataFrame, a list of point dicts (the HTTP JSON body) or a file;
 :func:`read_traces` reads a source holding many traces. The sources live in
-:mod:`mapmatch.trace_readers`.
+:mod:`mapmatch.trace.readers`.
 
 Validation happens once, here. A row that breaks a rule raises
 :class:`~mapmatch.errors.InvalidTraceError` naming the trace, the rows (0-based input row and,
@@ -55,7 +55,7 @@ Input columns (case-insensitive; unknown columns are ignored)
 (``lng``, ``longitude``); optional ``heading`` (``bearing``, ``course``, ``heading_deg``),
 ``speed`` (``speed_mps``), ``accuracy`` (``accuracy_m``), ``hdop``, ``odometer``
 (``odometer_m``), ``segment``. Tables are grouped into traces by their id columns
-(``trace_id``, ``trip_id``, ``vehicle_id`` ...; see :mod:`mapmatch.trace_readers`).
+(``trace_id``, ``trip_id``, ``vehicle_id`` ...; see :mod:`mapmatch.trace.readers`).
 """
 
 from __future__ import annotations
@@ -71,9 +71,9 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from mapmatch import chinacrs
 from mapmatch.errors import InputTypeError, InvalidTraceError, TraceFileError
-from mapmatch.trace_readers import RawTrace, id_columns, read_raw_traces
+from mapmatch.trace import chinacrs
+from mapmatch.trace.readers import RawTrace, id_columns, read_raw_traces
 
 if TYPE_CHECKING:
     from collections.abc import Iterable
@@ -784,7 +784,7 @@ def read_traces(
     id_column
         The column whose values name the traces of a table; default: the usual id columns
         (``trace_id``, ``trip_id``, ``track_id``, ``vehicle_id``, ``device_id``, ``id``; see
-        :mod:`mapmatch.trace_readers` for the rule).
+        :mod:`mapmatch.trace.readers` for the rule).
 
     Returns
     -------
@@ -810,7 +810,7 @@ def read_traces(
 
 def trace_from_raw(raw: RawTrace, *, crs: str = "wgs84") -> Trace:
     """
-    Validate one trace a reader of :mod:`mapmatch.trace_readers` returned.
+    Validate one trace a reader of :mod:`mapmatch.trace.readers` returned.
 
     Keeps what the reader knew: the source's line or record numbers for messages, its
     segments, and the records it dropped (in the report).

@@ -2,7 +2,7 @@
 
 The path of a piece is built transition by transition from the chosen candidates, and it only
 ever moves forward: a fix that the model holds still (a slow or stopped car's fix scattered a
-little backwards, :data:`~mapmatch.models.ROUTE_STANDSTILL`) leaves the path where it is, and
+little backwards, :data:`~mapmatch.hmm.routes.ROUTE_STANDSTILL`) leaves the path where it is, and
 the next move starts from the farthest point reached, not from the scattered fix. So noise
 around a stop never adds length. A U-turn in the middle of a road turns at the farthest point
 the fixes in between reached along the road (a dead end's end, when the fixes got there).
@@ -21,16 +21,16 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from mapmatch.loops import collapse_loops
-from mapmatch.models import ROUTE_SAME_EDGE, ROUTE_STANDSTILL, ROUTE_UTURN
+from mapmatch.hmm.loops import collapse_loops
+from mapmatch.hmm.routes import ROUTE_SAME_EDGE, ROUTE_STANDSTILL, ROUTE_UTURN
 from mapmatch.result import MatchedEdge, MatchedPoints, Segment
 
 if TYPE_CHECKING:
     from collections.abc import Callable
 
     from mapmatch.config import MatchConfig
-    from mapmatch.observations import Observations
-    from mapmatch.solution import Solution
+    from mapmatch.hmm.observations import Observations
+    from mapmatch.hmm.solution import Solution
     from mapmatch.trace import Trace
     from roadnets import RoadNetwork
 
@@ -60,7 +60,7 @@ class _PiecePath:
     end_m: FloatArray
     along_m: FloatArray  # distance along the path of each used fix of the piece
     jumps: int
-    loops: int  # loops taken out (:mod:`mapmatch.loops`)
+    loops: int  # loops taken out (:mod:`mapmatch.hmm.loops`)
 
 
 @njit(cache=True, nogil=True)
@@ -202,7 +202,7 @@ def _route_pieces(
             turn = length
         turn = min(turn, length)
         return [[ea, oa, turn], [eb, length - turn, ob]]
-    via = solution.table.edges(int(arrays.edge_v[ea]), int(arrays.edge_u[eb]), arrays.edge_u)
+    via = solution.routes.edges(ea, eb)
     return (
         [[ea, oa, float(edge_len[ea])]]
         + [[float(e), 0.0, float(edge_len[e])] for e in via]
@@ -248,7 +248,7 @@ def _continue_from(
 
 
 def _behind_front(
-    net: RoadNetwork, solution: Solution, frontier: list[float], limit_m: float
+    net: RoadNetwork, frontier: list[float], limit_m: float
 ) -> Callable[[int, float], bool]:
     """Whether a place lies at most ``limit_m`` behind the path's front along the road."""
     arrays = net.arrays
@@ -257,10 +257,12 @@ def _behind_front(
     def behind(edge: int, offset: float) -> bool:
         if edge == front_edge:
             return offset <= front + _EPS_M
-        mid = solution.table.lookup(
-            np.array([arrays.edge_v[edge]]), np.array([arrays.edge_u[front_edge]])
-        )[0][0]
-        return bool(arrays.edge_length_m[edge] - offset + mid + front <= limit_m)
+        ahead = arrays.edge_length_m[edge] - offset + front
+        if ahead > limit_m:
+            return False
+        one = np.array([edge], dtype=np.int64), np.array([front_edge], dtype=np.int64)
+        mid = float(net.edge_routes(*one, limit_m - ahead).distance_m[0])
+        return bool(ahead + mid <= limit_m)
 
     return behind
 
@@ -327,7 +329,7 @@ def _piece_path(
             hold_limit_m,
         )
         if pieces:
-            behind = _behind_front(net, solution, entries[-1], hold_limit_m)
+            behind = _behind_front(net, entries[-1], hold_limit_m)
             found = _continue_from(net, entries[-1], pieces, behind)
             if found is None:  # the move starts behind the front and turns off before it
                 done = _retract(entries, done, pieces[0], hold_limit_m)
@@ -353,9 +355,10 @@ def _piece_path(
     entries, along_m, loops = collapse_loops(
         net, obs, solution, start, entries, np.array(along, dtype=np.float64), config
     )
-    entries, along_m = _trim_ends(
-        entries, along_m, 0.5 * float(obs.sigma_m[used[start:stop]].min())
-    )
+    # an end fix within the observations' resolution (thinning_sigmas x sigma) of a junction
+    # cannot tell which side of it the car was: the path starts and ends at the junction
+    reach = config.thinning_sigmas * float(obs.sigma_m[used[start:stop]].min())
+    entries, along_m = _trim_ends(entries, along_m, reach)
     table = np.array(entries, dtype=np.float64).reshape(-1, 3)
     return _PiecePath(table[:, 0].astype(np.int64), table[:, 1], table[:, 2], along_m, jumps, loops)
 
@@ -367,8 +370,8 @@ def _trim_ends(
     Drop a sliver of a next (or previous) edge at either end of a path.
 
     A first or last fix a metre past a junction cannot be told from the junction itself:
-    a stretch shorter than ``reach_m`` (half a sigma) at an end of the path, on an edge of its
-    own, is taken as the junction, so the path neither starts nor ends on a road it never
+    a stretch shorter than ``reach_m`` at an end of the path, on an edge of its own, is taken
+    as the junction, so the path neither starts nor ends on a road it never
     drove along.
     """
     if len(entries) > 1 and entries[-1][2] - entries[-1][1] < reach_m:

@@ -8,7 +8,7 @@ Batch matching: folders of trace files in, one output per trace and ``summary.cs
    a ``failed`` summary row and the batch goes on); each trace gets a safe, unique output
    name; with ``resume`` the traces whose outputs are complete are skipped;
 3. the remaining traces are cut into tasks (a chunk of traces of one file) and run in this
-   process, a local process pool, or on a Dask cluster (:mod:`mapmatch.batch_executors`).
+   process, a local process pool, or on a Dask cluster (:mod:`mapmatch.batch.executors`).
    A task (:func:`match_chunk`) loads the network lazily once per worker process from the
    cache, reads its file, matches and writes each trace atomically, and returns one summary
    row per trace; a failing trace is recorded with its error and the task goes on;
@@ -16,7 +16,7 @@ Batch matching: folders of trace files in, one output per trace and ``summary.cs
    order at the end.
 
 "Complete" on resume means: the trace's main output file exists (written last, by rename,
-so never partial; see :mod:`mapmatch.batch_outputs`), ``summary.csv`` holds an ``ok`` row
+so never partial; see :mod:`mapmatch.batch.outputs`), ``summary.csv`` holds an ``ok`` row
 for it under the same output name, and ``run.json`` shows the earlier run used the same
 network, format and matcher options.
 """
@@ -37,8 +37,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
 import roadnets
-from mapmatch.batch_executors import make_executor
-from mapmatch.batch_inputs import (
+from mapmatch.batch.executors import make_executor
+from mapmatch.batch.inputs import (
     STDIN,
     BatchInputError,
     FileScan,
@@ -48,7 +48,7 @@ from mapmatch.batch_inputs import (
     error_line,
     scan_file,
 )
-from mapmatch.batch_outputs import (
+from mapmatch.batch.outputs import (
     FORMATS,
     SUMMARY_NAME,
     SummaryLog,
@@ -64,7 +64,7 @@ from mapmatch.config import MatchConfig
 from mapmatch.errors import InvalidTraceError, MapMatchError
 from mapmatch.matcher import match
 from mapmatch.trace import Trace, read_traces, trace_from_raw
-from mapmatch.trace_readers import read_raw_traces
+from mapmatch.trace.readers import read_raw_traces
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -129,7 +129,7 @@ class BatchOptions:
     id_column
         The column naming the traces of table files (CSV, Parquet ...); default: the usual
         id columns (``trace_id``, ``trip_id``, ``vehicle_id`` ...; see
-        :mod:`mapmatch.trace_readers`).
+        :mod:`mapmatch.trace.readers`).
     """
 
     inputs: tuple[str, ...]

@@ -1,0 +1,39 @@
+"""The trace input stage: validate, sort and report one vehicle trace; read trace files.
+
+:class:`Trace` (``model``) holds one vehicle's fixes; :func:`read_traces` reads a file of many;
+``readers`` parses the file formats, ``chinacrs`` converts GCJ-02/BD-09 coordinates.
+"""
+
+from __future__ import annotations
+
+from mapmatch.trace.model import (
+    FIELD_ALIASES,
+    IMPLAUSIBLE_SHARE,
+    MAX_PLAUSIBLE_SPEED_MPS,
+    MOVING_STEP_M,
+    SUPPORTED_CRS,
+    TIME_SOURCES,
+    UERE_M,
+    FloatArray,
+    Trace,
+    TraceReport,
+    check_match_inputs,
+    read_traces,
+    trace_from_raw,
+)
+
+__all__ = [
+    "FIELD_ALIASES",
+    "IMPLAUSIBLE_SHARE",
+    "MAX_PLAUSIBLE_SPEED_MPS",
+    "MOVING_STEP_M",
+    "SUPPORTED_CRS",
+    "TIME_SOURCES",
+    "UERE_M",
+    "FloatArray",
+    "Trace",
+    "TraceReport",
+    "check_match_inputs",
+    "read_traces",
+    "trace_from_raw",
+]
