@@ -5,14 +5,15 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import asdict, dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
-import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from mapmatch.types import FloatArray
 
 __all__ = ["DistanceCheck", "check_distance", "chord_length_m"]
 
-FloatArray = npt.NDArray[np.float64]
 Verdict = Literal["pass", "over", "under", "incomplete"]
 Source = Literal["odometer", "caller", "chord"]
 Evidence = Literal["positions", "heading", "odometer"]

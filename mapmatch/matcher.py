@@ -14,7 +14,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-import numpy.typing as npt
 
 from mapmatch.config import MatchConfig
 from mapmatch.distance import Evidence, check_distance, chord_length_m
@@ -40,10 +39,6 @@ if TYPE_CHECKING:
     from roadnets import RoadNetwork
 
 __all__ = ["match"]
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
 
 
 def match(

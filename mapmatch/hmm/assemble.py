@@ -18,7 +18,6 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-import numpy.typing as npt
 from numba import njit
 
 from mapmatch.hmm.loops import collapse_loops
@@ -32,13 +31,11 @@ if TYPE_CHECKING:
     from mapmatch.hmm.observations import Observations
     from mapmatch.hmm.solution import Solution
     from mapmatch.trace import Trace
+    from mapmatch.types import BoolArray, FloatArray, IntArray
     from roadnets import RoadNetwork
 
 __all__ = ["Assembled", "assemble"]
 
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
 
 _EPS_M = 1e-6
 

@@ -10,12 +10,10 @@ import numpy.typing as npt
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
+    from mapmatch.types import FloatArray, IntArray
     from roadnets import RoadNetwork
 
 __all__ = ["Candidates", "find_candidates", "search_radii"]
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
 
 
 @dataclass(frozen=True, slots=True)

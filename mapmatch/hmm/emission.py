@@ -10,18 +10,14 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-import numpy.typing as npt
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
     from mapmatch.hmm.candidates import Candidates
     from mapmatch.hmm.observations import Observations
+    from mapmatch.types import FloatArray, IntArray
 
 __all__ = ["distance_emission", "emissions", "heading_weight", "log_emission", "log_heading"]
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
 
 
 def log_emission(distance_m: FloatArray, *, sigma_m: FloatArray | float) -> FloatArray:

@@ -15,7 +15,6 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-import numpy.typing as npt
 
 from mapmatch.hmm.candidates import Candidates, find_candidates, search_radii
 from mapmatch.hmm.observations import Observations, Travel, merge_fixes
@@ -23,6 +22,7 @@ from mapmatch.hmm.observations import Observations, Travel, merge_fixes
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
     from mapmatch.trace import Trace
+    from mapmatch.types import FloatArray, IntArray
     from roadnets import RoadNetwork
 
 __all__ = [
@@ -35,10 +35,6 @@ __all__ = [
     "speed_from_positions",
     "with_sigma",
 ]
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
 
 
 @dataclass(frozen=True, slots=True)

@@ -18,7 +18,6 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-import numpy.typing as npt
 
 from mapmatch.hmm.emission import distance_emission
 from mapmatch.hmm.routes import ROUTE_STANDSTILL, ROUTE_VIA_GRAPH
@@ -28,11 +27,11 @@ if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
     from mapmatch.hmm.observations import Observations
     from mapmatch.hmm.solution import Solution
+    from mapmatch.types import FloatArray
     from roadnets import RoadNetwork
 
 __all__ = ["collapse_loops"]
 
-FloatArray = npt.NDArray[np.float64]
 
 _EPS_M = 1e-6
 

@@ -18,17 +18,13 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-import numpy.typing as npt
 from numba import njit
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
+    from mapmatch.types import BoolArray, FloatArray, IntArray
 
 __all__ = ["Observations", "Travel", "group_fixes", "merge_fixes"]
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
 
 
 @dataclass(frozen=True, slots=True)

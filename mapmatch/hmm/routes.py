@@ -13,11 +13,11 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-import numpy.typing as npt
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
     from mapmatch.hmm.candidates import Candidates
+    from mapmatch.types import FloatArray, IntArray
     from roadnets import EdgeRoutes, RoadNetwork
 
 __all__ = [
@@ -34,9 +34,6 @@ __all__ = [
     "uturn_routes",
 ]
 
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
 
 #: How a transition's route runs: forward along one edge, through the graph, a U-turn
 #: mid-road, through the graph with a U-turn at a node (scored as a U-turn, assembled as a

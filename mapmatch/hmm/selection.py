@@ -5,18 +5,15 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-import numpy.typing as npt
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
     from mapmatch.hmm.candidates import Candidates
     from mapmatch.hmm.fixes import Fixes
     from mapmatch.hmm.observations import Observations
+    from mapmatch.types import BoolArray, FloatArray
 
 __all__ = ["find_displaced", "find_off_road_runs", "find_outliers"]
-
-FloatArray = npt.NDArray[np.float64]
-BoolArray = npt.NDArray[np.bool_]
 
 
 def find_outliers(

@@ -13,7 +13,6 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-import numpy.typing as npt
 
 from mapmatch.hmm.emission import distance_emission, heading_weight
 from mapmatch.hmm.routes import (
@@ -30,13 +29,10 @@ if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
     from mapmatch.hmm.candidates import Candidates
     from mapmatch.hmm.observations import Observations
+    from mapmatch.types import FloatArray, IntArray
     from roadnets import EdgeRoutes, RoadNetwork
 
 __all__ = ["log_transition", "transitions", "uturn_penalties"]
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
 
 
 def log_transition(

@@ -11,7 +11,6 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-import numpy.typing as npt
 
 from mapmatch.hmm.emission import emissions
 from mapmatch.hmm.routes import candidate_pairs, route_search_bounds
@@ -23,13 +22,10 @@ if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
     from mapmatch.hmm.candidates import Candidates
     from mapmatch.hmm.observations import Observations
+    from mapmatch.types import BoolArray, IntArray
     from roadnets import RoadNetwork
 
 __all__ = ["cuts", "isolated", "repair_breaks", "solve"]
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
 
 
 def solve(

@@ -10,15 +10,15 @@ afresh. The loops run compiled (numba); numpy only.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import numpy.typing as npt
 from numba import njit
 
-__all__ = ["ViterbiResult", "posteriors", "viterbi"]
+if TYPE_CHECKING:
+    from mapmatch.types import FloatArray, IntArray
 
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
+__all__ = ["ViterbiResult", "posteriors", "viterbi"]
 
 
 @dataclass(frozen=True, slots=True)
