@@ -1,6 +1,15 @@
-"""Road networks: OSM extracts compiled into a routable, R-tree indexed directed graph."""
+"""
+Road networks: OSM extracts compiled into a routable, R-tree indexed directed graph.
+
+``import roadnets`` loads only what opening a cached network needs (numpy and this package);
+libosmium, pyproj, libspatialindex, the numba routers, networkx and shapely are imported when
+first used (:func:`from_graph`, the router classes and the CRS work import theirs on access).
+"""
 
 from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
 
 from roadnets.arrays import NetworkArrays
 from roadnets.drivable import ROAD_CLASSES
@@ -14,13 +23,25 @@ from roadnets.errors import (
     NoDrivableRoadsError,
     RoadNetworkError,
 )
-from roadnets.graph_import import from_graph
 from roadnets.loader import DEFAULT_NETWORK, default_network_path, load
+from roadnets.names import WayNames
 from roadnets.network import NetworkInfo, RoadNetwork
-from roadnets.routes import DEFAULT_UTURN_COST_M, EdgeRoutes, RouteTable
-from roadnets.routing import PathTable
+from roadnets.runtime import KernelWarmup, freeze_after_load, warm_kernels
 from roadnets.spatial import EdgeHits
-from roadnets.turns import TurnGraph
+from roadnets.turns import DEFAULT_UTURN_COST_M, TurnGraph
+
+if TYPE_CHECKING:
+    from roadnets.graph_import import from_graph
+    from roadnets.routes import EdgeRoutes, RouteTable
+    from roadnets.routing import PathTable
+
+#: Public names whose modules import heavy libraries, imported on first access.
+_LAZY = {
+    "from_graph": "roadnets.graph_import",
+    "EdgeRoutes": "roadnets.routes",
+    "RouteTable": "roadnets.routes",
+    "PathTable": "roadnets.routing",
+}
 
 __all__ = [
     "DEFAULT_NETWORK",
@@ -30,6 +51,7 @@ __all__ = [
     "EdgeHits",
     "EdgeRoutes",
     "InvalidNetworkSourceError",
+    "KernelWarmup",
     "MapMatchError",
     "NetworkArrays",
     "NetworkInfo",
@@ -42,7 +64,20 @@ __all__ = [
     "RoadNetworkError",
     "RouteTable",
     "TurnGraph",
+    "WayNames",
     "default_network_path",
+    "freeze_after_load",
     "from_graph",
     "load",
+    "warm_kernels",
 ]
+
+
+def __getattr__(name: str) -> object:
+    module = _LAZY.get(name)
+    if module is None:
+        msg = f"module 'roadnets' has no attribute {name!r}"
+        raise AttributeError(msg)
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value

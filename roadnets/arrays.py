@@ -69,6 +69,14 @@ class NetworkArrays:
         Via-way turn restrictions: driving the edges
         ``banned_seq_edge[banned_seq_ptr[i]:banned_seq_ptr[i + 1]]`` one right after the other
         is banned (at least three edges: from, via..., to).
+    name_way_id, name_ptr, name_utf8
+        Way names (``name``, else ``ref``): way ``name_way_id[i]`` (sorted) is named by the
+        UTF-8 bytes ``name_utf8[name_ptr[i]:name_ptr[i + 1]]``; read them through
+        :class:`roadnets.names.WayNames` (``RoadNetwork.way_names``).
+
+    Every array is read-only, whether compiled in this process or memory-mapped from the
+    cache: the compiled kernels then see one type of array and are compiled once, not once
+    for writable and once more for read-only arrays.
     """
 
     node_osm_id: IntArray
@@ -95,6 +103,13 @@ class NetworkArrays:
     banned_out: Int32Array
     banned_seq_ptr: IntArray
     banned_seq_edge: Int32Array
+    name_way_id: IntArray
+    name_ptr: IntArray
+    name_utf8: npt.NDArray[np.uint8]
+
+    def __post_init__(self) -> None:
+        for field in dataclasses.fields(self):
+            getattr(self, field.name).flags.writeable = False
 
     @property
     def n_nodes(self) -> int:

@@ -25,7 +25,7 @@ from roadnets.errors import CacheError
 __all__ = ["FORMAT_VERSION", "default_cache_dir", "entry_folder", "read_entry", "write_entry"]
 
 #: Bump whenever the compiled arrays change meaning; old entries are then ignored.
-FORMAT_VERSION = 4
+FORMAT_VERSION = 5
 
 #: The one file holding every array of an entry (layout and checksum in meta.json).
 ARRAYS_FILE = "arrays.bin"
@@ -81,13 +81,9 @@ def _checksum(path: Path) -> str:
     return digest.hexdigest()
 
 
-def write_entry(
-    folder: Path, arrays: NetworkArrays, meta: dict[str, Any], extra: dict[str, Any]
-) -> None:
+def write_entry(folder: Path, arrays: NetworkArrays, meta: dict[str, Any]) -> None:
     """
     Write an entry atomically: into a temporary sibling folder, then rename it into place.
-
-    ``extra`` maps file names to JSON-serialisable side data (way names...) stored with it.
 
     Raises
     ------
@@ -101,8 +97,6 @@ def write_entry(
         raise CacheError(str(parent), exc.strerror or str(exc)) from exc
     try:
         layout = arrays.save(tmp / ARRAYS_FILE)
-        for name, value in extra.items():
-            (tmp / name).write_text(json.dumps(value), encoding="utf-8")
         payload = {
             **meta,
             "format_version": FORMAT_VERSION,

@@ -19,6 +19,7 @@ import numpy as np
 from roadnets.arrays import NetworkArrays
 from roadnets.drivable import ROAD_CLASSES, direction_flags, road_speed_kph
 from roadnets.errors import NetworkTooWideError
+from roadnets.names import encode_names
 from roadnets.projection import (
     EARTH_RADIUS_M,
     MAX_SCALE_ERROR,
@@ -123,7 +124,12 @@ def compile_network(extract: OsmExtract, projector: Projector) -> NetworkArrays:
                 geoms.append((gx[::-1], gy[::-1], gs[::-1]))
                 if forward:
                     edges[first] = (*edges[first][:6], first + 1)
-    return _to_arrays(node_index, node_xy, edges, geoms, extract.restrictions)
+    names: dict[int, str] = {}
+    for way in ways:
+        label = way.tags.get("name") or way.tags.get("ref")
+        if label:
+            names[way.way_id] = label
+    return _to_arrays(node_index, node_xy, edges, geoms, extract.restrictions, names)
 
 
 def _node(
@@ -142,6 +148,7 @@ def _to_arrays(
     edges: list[tuple[int, int, int, float, int, bool, int]],
     geoms: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
     restrictions: list[TurnRestriction],
+    names: dict[int, str],
 ) -> NetworkArrays:
     n_nodes, n_edges = len(node_xy), len(edges)
     node_osm_id = np.fromiter(node_index.keys(), dtype=np.int64, count=n_nodes)
@@ -177,6 +184,7 @@ def _to_arrays(
     seg_start = np.repeat(geom_ptr[indexed], seg_counts) + _ranges(seg_counts)
 
     way_id = np.array([e[2] for e in edges], dtype=np.int64)
+    name_way_id, name_ptr, name_utf8 = encode_names(names)
     banned_in, banned_out, seq_ptr, seq_edge = _banned_turns(
         restrictions, u, v, way_id, node_osm_id, out_ptr, order
     )
@@ -205,6 +213,9 @@ def _to_arrays(
         banned_out=banned_out,
         banned_seq_ptr=seq_ptr,
         banned_seq_edge=seq_edge,
+        name_way_id=name_way_id,
+        name_ptr=name_ptr,
+        name_utf8=name_utf8,
     )
 
 

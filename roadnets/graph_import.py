@@ -142,18 +142,12 @@ def from_graph(
     extract = OsmExtract(ways, [], 0)
     projector = choose_projector(extract, where)
     arrays = compile_network(extract, projector)
-    way_names: dict[int, str] = {}
-    for way in ways:
-        label = way.tags.get("name") or way.tags.get("ref")
-        if label:
-            way_names[way.way_id] = label
     return RoadNetwork(
         network_id=name,
         source=where,
         source_sha256=_digest(arrays),
         arrays=arrays,
         projector=projector,
-        way_names=way_names,
         clipped_ways=0,
         from_cache=False,
         load_s=time.perf_counter() - started,

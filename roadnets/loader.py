@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import logging
 import time
 from importlib import resources
@@ -26,7 +25,6 @@ from roadnets.errors import (
     NoDrivableRoadsError,
 )
 from roadnets.network import RoadNetwork
-from roadnets.osm_reader import read_osm
 from roadnets.projection import Projector
 
 if TYPE_CHECKING:
@@ -111,16 +109,13 @@ def load(
         if cached is not None:
             return cached
 
+    from roadnets.osm_reader import read_osm  # libosmium: only to compile
+
     extract = read_osm(path)
     if not extract.ways:
         raise NoDrivableRoadsError(str(path))
     projector = choose_projector(extract, str(path))
     arrays = compile_network(extract, projector)
-    way_names: dict[int, str] = {}
-    for way in extract.ways:
-        label = way.tags.get("name") or way.tags.get("ref")
-        if label:
-            way_names[way.way_id] = label
     entry = None
     if folder is not None:
         entry = entry_folder(folder, digest)
@@ -132,15 +127,13 @@ def load(
             "nodes": arrays.n_nodes,
             "edges": arrays.n_edges,
         }
-        names = {str(k): v for k, v in way_names.items()}
-        write_entry(entry, arrays, meta, {"way_names.json": names})
+        write_entry(entry, arrays, meta)
     return RoadNetwork(
         network_id=network_id_of(path),
         source=str(path),
         source_sha256=digest,
         arrays=arrays,
         projector=projector,
-        way_names=way_names,
         clipped_ways=extract.clipped_ways,
         from_cache=False,
         load_s=time.perf_counter() - started,
@@ -160,7 +153,6 @@ def _open_entry(path: Path, entry: Path, digest: str, started: float) -> RoadNet
         source_sha256=digest,
         arrays=arrays,
         projector=Projector(str(meta["crs"])),
-        way_names=_read_way_names(entry),
         clipped_ways=int(meta["clipped_ways"]),
         from_cache=True,
         load_s=time.perf_counter() - started,
@@ -209,11 +201,3 @@ def _cache_folder(path: Path, cache_dir: str | os.PathLike[str] | None) -> Path 
         _log.warning("%s; loading %s without a cache", exc, path.name)
         return None
     return folder
-
-
-def _read_way_names(entry: Path) -> dict[int, str]:
-    try:
-        raw = json.loads((entry / "way_names.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return {}
-    return {int(k): str(v) for k, v in raw.items()}

@@ -9,24 +9,27 @@ from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import networkx as nx
 import numpy as np
 import numpy.typing as npt
-from shapely.geometry import LineString
 
 from roadnets.drivable import ROAD_CLASSES
-from roadnets.routes import DEFAULT_UTURN_COST_M, EdgeRoutes, RouteTable, route_pairs, route_table
-from roadnets.routing import PathTable, shortest_path_table
+from roadnets.names import WayNames
 from roadnets.spatial import EdgeHits, build_rtree, query_edges
-from roadnets.turns import TurnGraph, build_turn_graph
+from roadnets.turns import DEFAULT_UTURN_COST_M, TurnGraph, build_turn_graph
 
 if TYPE_CHECKING:
     from collections.abc import Callable
 
+    import networkx as nx
     from rtree.index import Index
 
     from roadnets.arrays import NetworkArrays
     from roadnets.projection import Projector
+    from roadnets.routes import EdgeRoutes, RouteTable
+    from roadnets.routing import PathTable
+
+# The routers (numba), networkx and shapely are imported where they are first used: loading a
+# cached network and matching on it needs none of them but the routers.
 
 __all__ = ["NetworkInfo", "RoadNetwork"]
 
@@ -88,7 +91,6 @@ class RoadNetwork:
     source_sha256: str
     arrays: NetworkArrays
     projector: Projector
-    way_names: dict[int, str]
     clipped_ways: int = 0
     from_cache: bool = False
     load_s: float = 0.0
@@ -116,6 +118,12 @@ class RoadNetwork:
         else:
             keep = tuple(f.name for f in dataclasses.fields(self) if f.name != "_rtree_lock")
         return _unpickle, ({name: getattr(self, name) for name in keep},)
+
+    @cached_property
+    def way_names(self) -> WayNames:
+        """``{way id: name}`` (``name``, else ``ref``), read from the arrays like a dict."""
+        a = self.arrays
+        return WayNames(a.name_way_id, a.name_ptr, a.name_utf8)
 
     @property
     def crs(self) -> str:
@@ -174,6 +182,8 @@ class RoadNetwork:
 
         Answered from the table of :meth:`precompute_paths` when every bound fits in it.
         """
+        from roadnets.routing import shortest_path_table
+
         bounds = np.asarray(bounds_m, dtype=np.float64)
         if self.precomputed is not None and bool(np.all(bounds <= self.precomputed_bound_m)):
             return self.precomputed
@@ -190,6 +200,8 @@ class RoadNetwork:
         the number of nodes times the nodes within reach, so measure first
         (``benchmarks/bench_match.py`` reports both ways).
         """
+        from roadnets.routing import shortest_path_table
+
         table = shortest_path_table(
             self.arrays, np.arange(self.arrays.n_nodes), np.asarray(bound_m, dtype=np.float64)
         )
@@ -231,6 +243,8 @@ class RoadNetwork:
         edge_cost, turn_cost
             Search costs other than lengths (see :func:`roadnets.routes.route_pairs`).
         """
+        from roadnets.routes import route_pairs
+
         table = self.precomputed_routes
         bounds = np.asarray(bounds_m, dtype=np.float64)
         usable = (
@@ -268,6 +282,8 @@ class RoadNetwork:
         See :func:`roadnets.routes.route_table`; ``edge_cost`` and ``turn_cost`` replace the
         lengths as search costs (for a fastest route with turn penalties, say).
         """
+        from roadnets.routes import route_table
+
         return route_table(
             self.arrays,
             self.turns,
@@ -429,6 +445,9 @@ class RoadNetwork:
         ``oneway``, ``speed_kph``, ``name``, ``geometry`` (shapely, metres) and ``index``
         (the edge's position in :attr:`arrays`). Built on first use.
         """
+        import networkx as nx
+        from shapely.geometry import LineString
+
         a = self.arrays
         G: nx.MultiDiGraph = nx.MultiDiGraph(crs=self.crs, name=self.network_id)  # type: ignore[type-arg]
         lon, lat = self.unproject(a.node_x, a.node_y)

@@ -37,15 +37,13 @@ import numpy as np
 import numpy.typing as npt
 
 from roadnets.route_search import find_records, gather, group_pairs, search_many
+from roadnets.turns import DEFAULT_UTURN_COST_M
 
 if TYPE_CHECKING:
     from roadnets.arrays import NetworkArrays
     from roadnets.turns import TurnGraph
 
 __all__ = ["DEFAULT_UTURN_COST_M", "EdgeRoutes", "RouteTable", "route_pairs", "route_table"]
-
-#: Search-key cost of a U-turn at a node, metres (not part of the reported length).
-DEFAULT_UTURN_COST_M = 50.0
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]

@@ -8,9 +8,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
-from rtree import index as rtree_index
 
 if TYPE_CHECKING:
+    from rtree import index as rtree_index
+
     from roadnets.arrays import NetworkArrays
 
 __all__ = ["EdgeHits", "build_rtree", "query_edges"]
@@ -57,6 +58,8 @@ class EdgeHits:
 
 def build_rtree(arrays: NetworkArrays) -> rtree_index.Index:
     """Bulk-load an in-memory R-tree with the bounding box of every indexed segment."""
+    from rtree import index as rtree_index  # libspatialindex: loaded when first needed
+
     a = arrays.seg_start
     x0, y0 = arrays.geom_x[a], arrays.geom_y[a]
     x1, y1 = arrays.geom_x[a + 1], arrays.geom_y[a + 1]

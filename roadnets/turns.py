@@ -27,7 +27,12 @@ if TYPE_CHECKING:
 
     from roadnets.arrays import NetworkArrays
 
-__all__ = ["TurnGraph", "build_turn_graph"]
+__all__ = ["DEFAULT_UTURN_COST_M", "TurnGraph", "build_turn_graph"]
+
+#: Search-key cost of a U-turn at a node, metres (not part of the reported length; see
+#: :mod:`roadnets.routes`). Here, with the turn graph, so that it is known without importing
+#: the compiled router.
+DEFAULT_UTURN_COST_M = 50.0
 
 IntArray = npt.NDArray[np.int64]
 Int32Array = npt.NDArray[np.int32]

@@ -43,8 +43,9 @@ def _same_answers(one: roadnets.RoadNetwork, other: roadnets.RoadNetwork) -> Non
     assert np.array_equal(paths[0].keys, paths[1].keys)
     assert np.array_equal(paths[0].distance_m, paths[1].distance_m)
     mine_info, their_info = one.info(), other.info()
-    same = {"load_s": mine_info.load_s, "from_cache": mine_info.from_cache}
-    assert mine_info == dataclasses.replace(their_info, **same)
+    assert mine_info == dataclasses.replace(
+        their_info, load_s=mine_info.load_s, from_cache=mine_info.from_cache
+    )
     assert one.way_names == other.way_names
 
 

@@ -1,0 +1,143 @@
+"""Way names (``name``, else ``ref``) kept as three arrays, read like a dict.
+
+A dict of hundreds of thousands of ``int -> str`` entries costs tens of MB of Python objects
+per process and a JSON parse at every load. The names live in the network's arrays instead
+(memory-mapped from the cache and shared between processes like the rest): the sorted way ids,
+offsets, and the UTF-8 bytes of every name end to end. :class:`WayNames` reads them as a
+mapping and looks many up at once (:meth:`WayNames.names_of`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, MutableMapping
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping
+
+__all__ = ["WayNames", "encode_names"]
+
+IntArray = npt.NDArray[np.int64]
+ByteArray = npt.NDArray[np.uint8]
+
+
+def encode_names(names: Mapping[int, str]) -> tuple[IntArray, IntArray, ByteArray]:
+    """
+    Sorted way ids, offsets and UTF-8 bytes of a ``{way id: name}`` mapping.
+
+    Examples
+    --------
+    >>> ids, ptr, blob = encode_names({7: "Rue Grimaldi", 3: "A8"})
+    >>> ids.tolist(), ptr.tolist(), bytes(blob).decode()
+    ([3, 7], [0, 2, 14], 'A8Rue Grimaldi')
+    """
+    ids = sorted(names)
+    encoded = [names[i].encode("utf-8") for i in ids]
+    ptr = np.zeros(len(ids) + 1, dtype=np.int64)
+    np.cumsum([len(b) for b in encoded], out=ptr[1:])
+    blob = np.frombuffer(b"".join(encoded), dtype=np.uint8).copy()
+    return np.asarray(ids, dtype=np.int64), ptr, blob
+
+
+class WayNames(MutableMapping[int, str]):
+    """
+    ``{way id: name}`` over the network's name arrays.
+
+    Reads like the dict it replaces (``names.get(way, "")``, ``len``, iteration in way id
+    order). Writes go to a small overlay in this process only (tests relabel a street this
+    way); the arrays are never changed.
+
+    Examples
+    --------
+    >>> names = WayNames(*encode_names({7: "Rue Grimaldi", 3: "A8"}))
+    >>> names[7], names.get(5, ""), len(names), list(names)
+    ('Rue Grimaldi', '', 2, [3, 7])
+    >>> names.names_of(np.array([7, 5, 3]))
+    ['Rue Grimaldi', '', 'A8']
+    """
+
+    __slots__ = ("_blob", "_deleted", "_ids", "_overlay", "_ptr")
+
+    def __init__(self, way_id: IntArray, ptr: IntArray, blob: ByteArray) -> None:
+        self._ids, self._ptr, self._blob = way_id, ptr, blob
+        self._overlay: dict[int, str] = {}
+        self._deleted: set[int] = set()
+
+    def _index(self, way: int) -> int:
+        i = int(np.searchsorted(self._ids, way))
+        return i if i < len(self._ids) and int(self._ids[i]) == way else -1
+
+    def _decode(self, i: int) -> str:
+        return bytes(self._blob[self._ptr[i] : self._ptr[i + 1]]).decode("utf-8")
+
+    def __getitem__(self, way: int) -> str:
+        if way in self._overlay:
+            return self._overlay[way]
+        i = self._index(int(way)) if way not in self._deleted else -1
+        if i < 0:
+            raise KeyError(way)
+        return self._decode(i)
+
+    def __contains__(self, way: object) -> bool:
+        if way in self._overlay:
+            return True
+        if not isinstance(way, int | np.integer) or way in self._deleted:
+            return False
+        return self._index(int(way)) >= 0
+
+    def __setitem__(self, way: int, name: str) -> None:
+        self._overlay[int(way)] = name
+        self._deleted.discard(int(way))
+
+    def __delitem__(self, way: int) -> None:
+        if way in self._overlay:
+            del self._overlay[way]
+            if self._index(int(way)) >= 0:
+                self._deleted.add(int(way))
+            return
+        if way in self._deleted or self._index(int(way)) < 0:
+            raise KeyError(way)
+        self._deleted.add(int(way))
+
+    def __iter__(self) -> Iterator[int]:
+        extra = sorted(k for k in self._overlay if self._index(k) < 0)
+        for way in self._ids.tolist():
+            if way not in self._deleted:
+                yield way
+        yield from extra
+
+    def __len__(self) -> int:
+        extra = sum(1 for k in self._overlay if self._index(k) < 0)
+        return len(self._ids) - len(self._deleted) + extra
+
+    def __repr__(self) -> str:
+        return f"<WayNames: {len(self):,} named ways>"
+
+    def __eq__(self, other: object) -> bool:
+        plain = isinstance(other, WayNames) and not (
+            self._overlay or self._deleted or other._overlay or other._deleted
+        )
+        if plain and isinstance(other, WayNames):
+            return bool(
+                np.array_equal(self._ids, other._ids)
+                and np.array_equal(self._ptr, other._ptr)
+                and np.array_equal(self._blob, other._blob)
+            )
+        return super().__eq__(other)
+
+    __hash__ = None  # type: ignore[assignment]  # mutable, as a dict
+
+    def names_of(self, way_ids: npt.NDArray[np.integer[Any]]) -> list[str]:
+        """The name of each way of an array (``""`` where it has none), one search for all."""
+        ways = np.asarray(way_ids, dtype=np.int64).ravel()
+        if self._overlay or self._deleted or not len(self._ids):
+            return [self.get(way, "") for way in ways.tolist()]
+        i = np.minimum(np.searchsorted(self._ids, ways), len(self._ids) - 1)
+        found = self._ids[i] == ways
+        lo = np.where(found, self._ptr[i], 0).tolist()
+        hi = np.where(found, self._ptr[i + 1], 0).tolist()
+        blob = self._blob
+        return [bytes(blob[a:b]).decode("utf-8") for a, b in zip(lo, hi, strict=True)]
