@@ -111,6 +111,10 @@ class NetworkArrays:
         for field in dataclasses.fields(self):
             getattr(self, field.name).flags.writeable = False
 
+    def __reduce__(self) -> tuple[type[NetworkArrays], tuple[npt.NDArray[Any], ...]]:
+        # through the constructor, so that unpickled arrays are read-only too
+        return NetworkArrays, tuple(getattr(self, f.name) for f in dataclasses.fields(self))
+
     @property
     def n_nodes(self) -> int:
         """Number of graph nodes."""

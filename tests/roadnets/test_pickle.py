@@ -126,6 +126,7 @@ def test_an_uncached_network_pickles_its_arrays(data_dir: Path) -> None:
     assert size < len(blob) < size + 20_000
     again = pickle.loads(blob)
     _same_answers(net, again)
+    assert not again.arrays.edge_length_m.flags.writeable  # as every network's arrays
 
 
 def test_a_graph_network_pickles_too(data_dir: Path) -> None:
