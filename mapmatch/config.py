@@ -221,6 +221,15 @@ class MatchConfig:
         2.0, doc="routes are searched up to this many times the great-circle", gt=0, le=100
     )
     route_slack_m: float = _param(300.0, doc="plus this much", unit="m", ge=0, le=100_000)
+    route_reach_mps: float = _param(
+        15.0,
+        doc="or, when more, this speed times the interval: a detour round a banned turn "
+        "between sparse fixes is far longer than their distance",
+        unit="m/s",
+        ge=0,
+        le=100,
+    )
+
     speed_factor: float = _param(
         1.5,
         doc="a route needing more than this many times its speed limit (plus speed_margin_mps) "

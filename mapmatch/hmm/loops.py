@@ -10,11 +10,13 @@ scored once as driven (their chosen candidates and moves) and once as a car that
 place where the loop starts (every fix's emission there, no moves), each with the moves into
 and out of the loop. A loop stays only when it explains the fixes better by at least
 ``loop_penalty`` nats; a car going round a block or into a dead end has fixes all along the
-loop, far from its start, and keeps it easily.
+loop, far from its start, and keeps it easily. A loop that a turn restriction forces (the
+only legal way round a banned turn) is never taken out.
 """
 
 from __future__ import annotations
 
+import itertools
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -215,13 +217,26 @@ def collapse_loops(
         cut = None
         for place, s0, s1 in loops:
             gain = _loop_gain(net, obs, solution, start, along, entries, place, s0, s1, config)
-            if gain < config.loop_penalty:
-                cut = (s0, s1)
+            if gain >= config.loop_penalty:
+                continue
+            shorter = _cut(entries, s0, s1)
+            if _legal(net, shorter):  # a loop that a turn restriction forces stays
+                cut = (s0, s1, shorter)
                 break
         if cut is None:
             break
-        s0, s1 = cut
-        entries = _cut(entries, s0, s1)
+        s0, s1, entries = cut
         along = np.where(along >= s1 - _EPS_M, along - (s1 - s0), np.minimum(along, s0))
         removed += 1
     return entries, along, removed
+
+
+def _legal(net: RoadNetwork, entries: list[list[float]]) -> bool:
+    """Whether the path's moves from edge to edge are all allowed (restrictions obeyed)."""
+    edges = [int(e) for e, _, _ in entries]
+    drive = [e for i, e in enumerate(edges) if i == 0 or e != edges[i - 1]]
+    arrays = net.arrays
+    for a, b in itertools.pairwise(drive):
+        if arrays.edge_v[a] != arrays.edge_u[b]:
+            return True  # a jump in the path (drawn as such): nothing to check across it
+    return net.turns.first_banned(drive) == -1

@@ -79,9 +79,24 @@ def candidate_pairs(ptr: IntArray) -> CandidatePairs:
     return CandidatePairs(step, ptr[step] + a_rank, ptr[step + 1] + b_rank, a_rank, b_rank)
 
 
-def route_search_bounds(great_circle_m: FloatArray, config: MatchConfig) -> FloatArray:
-    """Longest route worth searching after each fix: ``route_factor * gc + route_slack_m``."""
-    return config.route_factor * great_circle_m + config.route_slack_m
+def route_search_bounds(
+    great_circle_m: FloatArray, dt_s: FloatArray, config: MatchConfig
+) -> FloatArray:
+    """
+    Longest route worth searching after each fix.
+
+    ``route_factor * gc + route_slack_m``, or ``route_reach_mps * dt`` when that is more: a
+    detour round a banned turn between sparse fixes can be far longer than their distance.
+
+    Examples
+    --------
+    >>> from mapmatch.config import MatchConfig
+    >>> route_search_bounds(np.array([20.0, 20.0]), np.array([1.0, 60.0]), MatchConfig())
+    array([340., 900.])
+    """
+    bound = config.route_factor * great_circle_m + config.route_slack_m
+    reach = np.nan_to_num(config.route_reach_mps * dt_s, nan=0.0)
+    return np.asarray(np.maximum(bound, reach), dtype=np.float64)
 
 
 def routes_between(

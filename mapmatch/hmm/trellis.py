@@ -50,7 +50,8 @@ def solve(
 
     step_m = np.hypot(np.diff(fixes.x[used]), np.diff(fixes.y[used]))
     pairs = candidate_pairs(cands.ptr)
-    bounds = route_search_bounds(step_m, config)[pairs.step]
+    dt = np.diff(fixes.time_s[used])
+    bounds = route_search_bounds(step_m, dt, config)[pairs.step]
     lt, kind, routes = transitions(net, fixes, cands, pairs, bounds, used, step_m, config)
     lt[cut_after[pairs.step] | (lt < config.min_log_transition)] = -np.inf
 
