@@ -230,3 +230,21 @@ def test_offsets_of_nearby_edges_place_the_projection_back(
     assert np.allclose(px, hits.x, atol=1e-6)
     assert np.allclose(py, hits.y, atol=1e-6)
     assert np.all(hits.offset_m <= a.edge_length_m[hits.edge])
+
+
+@pytest.mark.parametrize(("lon_0", "lat_0"), [(7.42, 43.73), (-122.29, 37.81), (179.99, -17.8)])
+def test_the_fast_pipeline_is_the_crs_it_names(lon_0: float, lat_0: float) -> None:
+    # the projector transforms through an explicit PROJ pipeline; geopandas, FMM and users
+    # read net.crs: both must give the same metres
+    from pyproj import Transformer
+
+    projector = Projector.local(lon_0, lat_0)
+    lon = lon_0 + np.array([-0.8, 0.0, 0.3, 1.2])
+    lat = lat_0 + np.array([0.5, 0.0, -0.7, 0.2])
+    x, y = projector.forward(lon, lat)
+    ex, ey = Transformer.from_crs("EPSG:4326", projector.crs, always_xy=True).transform(lon, lat)
+    assert np.allclose(x, ex, rtol=0, atol=1e-6)
+    assert np.allclose(y, ey, rtol=0, atol=1e-6)
+    back_lon, back_lat = projector.inverse(x, y)
+    assert np.allclose((back_lon - lon + 180) % 360 - 180, 0, atol=1e-9)
+    assert np.allclose(back_lat, lat, atol=1e-9)
