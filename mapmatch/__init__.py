@@ -9,6 +9,9 @@
 
 from __future__ import annotations
 
+import importlib
+from typing import TYPE_CHECKING, Any
+
 from mapmatch.config import OVERRIDABLE, MatchConfig, Param, parameters
 from mapmatch.distance import DistanceCheck
 from mapmatch.errors import (
@@ -19,7 +22,6 @@ from mapmatch.errors import (
     RoadNetworkError,
     TraceFileError,
 )
-from mapmatch.matcher import match
 from mapmatch.result import (
     Diagnostics,
     MatchedEdge,
@@ -28,7 +30,35 @@ from mapmatch.result import (
     MatchStats,
     Segment,
 )
-from mapmatch.trace import Trace, TraceReport, read_traces
+
+if TYPE_CHECKING:
+    from mapmatch.matcher import match
+    from mapmatch.trace import Trace, TraceReport, read_traces
+
+#: Names imported when first used, so ``import mapmatch`` stays light (the matcher's compiled
+#: kernels and the trace readers' pandas load on the first match or trace): name -> module.
+_LAZY = {
+    "match": "mapmatch.matcher",
+    "Trace": "mapmatch.trace",
+    "TraceReport": "mapmatch.trace",
+    "read_traces": "mapmatch.trace",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """Import a lazily exported name on first use (PEP 562)."""
+    module = _LAZY.get(name)
+    if module is None:
+        msg = f"module 'mapmatch' has no attribute {name!r}"
+        raise AttributeError(msg)
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
+
 
 __all__ = [
     "OVERRIDABLE",
