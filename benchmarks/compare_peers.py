@@ -540,6 +540,7 @@ def markdown(rows: list[Row], header: dict[str, Any]) -> str:
         f"{scoring.DEFAULT_MAX_ANGLE_DEG:g} deg. Input `positions`: time, lon, lat; `full`: "
         "plus heading, speed, accuracy, odometer (FMM, leuven and mappymatch use positions "
         "only, so their one run stands in both; Meili uses the per-point accuracy). "
+        f"Our code: {header['ours_tree']} (git HEAD {header['git_head'][:10]}). "
         f"Run wall time {header['wall_s'] / 60:.1f} min; load average "
         f"{header['loadavg_start']:.1f} at the start, {header['loadavg_end']:.1f} at the end "
         "(other work on the machine inflates wall-clock points/s; `CPU points/s` uses the "
@@ -556,6 +557,19 @@ def _cpu_name() -> str:
     except OSError:
         pass
     return platform.processor() or "unknown CPU"
+
+
+def _git_head() -> str:
+    try:
+        r = subprocess.run(
+            ["git", "-C", str(ROOT), "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+    except OSError:
+        return "unknown"
+    return r.stdout.strip() or "unknown"
 
 
 def _nan_to_none(x: Any) -> Any:
@@ -627,6 +641,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     p.add_argument("--timeout", type=float, default=900.0, help="seconds per peer job")
     p.add_argument(
+        "--ours-tree",
+        type=Path,
+        default=None,
+        help="run our matcher and the simulator from this source tree instead of the installed "
+        "package (e.g. `git archive HEAD | tar -x -C /tmp/mm-head`), so that edits in progress "
+        "in the working tree cannot reach a long run",
+    )
+    p.add_argument(
         "--interim",
         action="store_true",
         help="use the interim simulator even when `mapmatch simulate` exists",
@@ -654,6 +676,16 @@ def main(argv: list[str] | None = None) -> int:
     t_start = time.perf_counter()
     load_start = os.getloadavg()[0]
     a = parse_args(argv)
+    if a.ours_tree is not None:
+        tree = a.ours_tree.resolve()
+        if not (tree / "mapmatch" / "__init__.py").exists() or not (tree / "roadnets").is_dir():
+            msg = f"--ours-tree {tree}: no mapmatch/ and roadnets/ packages there"
+            raise SystemExit(msg)
+        # children (our runner, the simulator) and this process's roadnets import come from it
+        os.environ["PYTHONPATH"] = os.pathsep.join(
+            p for p in (str(tree), os.environ.get("PYTHONPATH", "")) if p
+        )
+        sys.path.insert(0, str(tree))
     extracts = [resolve_extract(e) for e in a.extract]
     sets = parse_sets(a.sets, a.outlier_rate)
     inputs = [s.strip() for s in a.inputs.split(",") if s.strip()]
@@ -853,6 +885,8 @@ def main(argv: list[str] | None = None) -> int:
         "min_time_s": a.min_time,
         "fmm": fmm_files,
         "command": " ".join([Path(sys.executable).name, *sys.argv]),
+        "ours_tree": str(a.ours_tree) if a.ours_tree else "installed package",
+        "git_head": _git_head(),
         "wall_s": time.perf_counter() - t_start,
         "loadavg_start": load_start,
         "loadavg_end": os.getloadavg()[0],
