@@ -25,7 +25,7 @@ from roadnets.errors import CacheError
 __all__ = ["FORMAT_VERSION", "default_cache_dir", "entry_folder", "read_entry", "write_entry"]
 
 #: Bump whenever the compiled arrays change meaning; old entries are then ignored.
-FORMAT_VERSION = 5
+FORMAT_VERSION = 6
 
 #: The one file holding every array of an entry (layout and checksum in meta.json).
 ARRAYS_FILE = "arrays.bin"

@@ -98,6 +98,10 @@ def compile_network(extract: OsmExtract, projector: Projector) -> NetworkArrays:
     node_xy: list[tuple[float, float]] = []
     edges: list[tuple[int, int, int, float, int, bool, int]] = []  # u, v, way, speed, cls, ow, twin
     geoms: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # x, y, geodesic steps
+    # a piece of road drawn twice (two ways through the same nodes, the same way round) is one
+    # edge: the later copy is dropped, so a match does not hop between the copies
+    drawn: dict[tuple[int, ...], int] = {}
+    duplicates = 0
     start = 0
     for way in ways:
         n = len(way.node_ids)
@@ -114,21 +118,29 @@ def compile_network(extract: OsmExtract, projector: Projector) -> NetworkArrays:
             u = _node(node_index, node_xy, int(way.node_ids[a]), float(gx[0]), float(gy[0]))
             v = _node(node_index, node_xy, int(way.node_ids[b]), float(gx[-1]), float(gy[-1]))
             oneway = not (forward and backward)
+            nodes = tuple(way.node_ids[a : b + 1].tolist())
+            fwd = forward and nodes not in drawn
+            bwd = backward and nodes[::-1] not in drawn
+            duplicates += (forward and not fwd) + (backward and not bwd)
             first = len(edges)
-            if forward:
+            if fwd:
+                drawn[nodes] = len(edges)
                 edges.append((u, v, way.way_id, speed_fwd, cls, oneway, -1))
                 geoms.append((gx, gy, gs))
-            if backward:
-                twin = first if forward else -1
+            if bwd:
+                twin = first if fwd else -1
+                drawn[nodes[::-1]] = len(edges)
                 edges.append((v, u, way.way_id, speed_bwd, cls, oneway, twin))
                 geoms.append((gx[::-1], gy[::-1], gs[::-1]))
-                if forward:
+                if fwd:
                     edges[first] = (*edges[first][:6], first + 1)
     names: dict[int, str] = {}
     for way in ways:
         label = way.tags.get("name") or way.tags.get("ref")
         if label:
             names[way.way_id] = label
+    if duplicates:
+        _log.info("%d directed edges drawn twice by overlapping ways kept once", duplicates)
     return _to_arrays(node_index, node_xy, edges, geoms, extract.restrictions, names)
 
 
