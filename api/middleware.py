@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import logging
 import re
-import secrets
 import time
 import uuid
 from typing import TYPE_CHECKING, Final
@@ -25,6 +24,7 @@ from api.logs import ACCESS_LOGGER
 if TYPE_CHECKING:
     from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+    from api.deps import BearerToken
     from api.metrics import ServiceMetrics
 
 __all__ = ["SCOPE_KEY", "ServiceMiddleware", "send_error"]
@@ -58,7 +58,7 @@ class ServiceMiddleware:
     app
         The ASGI app inside.
     token
-        Bearer token every path but ``/healthz`` requires; ``None`` = no authentication.
+        The bearer token every path but ``/healthz`` requires; ``None`` = no authentication.
     metrics
         Where request counts and latencies go.
     access_log
@@ -66,10 +66,15 @@ class ServiceMiddleware:
     """
 
     def __init__(
-        self, app: ASGIApp, *, token: str | None, metrics: ServiceMetrics, access_log: bool
+        self,
+        app: ASGIApp,
+        *,
+        token: BearerToken | None,
+        metrics: ServiceMetrics,
+        access_log: bool,
     ) -> None:
         self.app = app
-        self._token = token.encode() if token else None
+        self._token = token
         self._metrics = metrics
         self._access_log = access_log
 
@@ -97,7 +102,7 @@ class ServiceMiddleware:
 
         try:
             if self._token is not None and scope["path"] not in _OPEN_PATHS:
-                problem = self._auth_problem(headers.get("authorization"))
+                problem = self._token.problem(headers.get("authorization"))
                 if problem:
                     info["error"] = "unauthorized"
                     await send_error(send_wrapper, UnauthorizedError(problem))
@@ -116,17 +121,6 @@ class ServiceMiddleware:
                 await send_error(send_wrapper, exc)
         finally:
             self._record(scope, info, status, time.perf_counter() - started)
-
-    def _auth_problem(self, header: str | None) -> str | None:
-        if not header:
-            return "this service requires a bearer token: send 'Authorization: Bearer <token>'"
-        scheme, _, credentials = header.partition(" ")
-        if scheme.lower() != "bearer" or not credentials.strip():
-            return "the Authorization header must be 'Bearer <token>'"
-        assert self._token is not None
-        if not secrets.compare_digest(credentials.strip().encode(), self._token):
-            return "the bearer token is wrong"
-        return None
 
     def _record(self, scope: Scope, info: dict[str, object], status: int, seconds: float) -> None:
         route = scope.get("route")

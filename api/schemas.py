@@ -1,8 +1,9 @@
 """
 Request and response models of the HTTP API; every field is documented in OpenAPI.
 
-The request side is validated with these models (bounds included, so a sigma of -1 is a 422
-naming ``options.sigma_m`` before the matcher sees it). The response side documents what
+The request envelope and the options are validated with these models (bounds included, so a
+sigma of -1 is a 422 naming ``options.sigma_m`` before the matcher sees it); the points are
+documented here (:class:`PointIn`) but checked by the trace reader. The response side documents what
 ``MatchResult.to_geojson()`` produces (DESIGN.md "Output"); the service sends that document as
 it is and does not re-validate it, which would cost more than the match for long traces.
 """
@@ -33,6 +34,7 @@ __all__ = [
     "ErrorDetail",
     "ErrorResponse",
     "HealthResponse",
+    "MatchEnvelope",
     "MatchOptions",
     "MatchQuery",
     "MatchRequest",
@@ -217,7 +219,33 @@ _FUSED_DESCRIPTION = (
 )
 
 
-class MatchRequest(BaseModel):
+class MatchEnvelope(BaseModel):
+    """
+    The members of a JSON body other than ``points``: what the HTTP layer validates itself.
+
+    The points go as they are to :meth:`mapmatch.Trace.from_records`, the reader the library
+    uses, which checks them (with the same rules for every input format) and names the
+    offending point and field.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    trace_id: str = Field(
+        default="trace", min_length=1, max_length=200, description="Name of the trace."
+    )
+    fused_distance_m: float | None = Field(
+        default=None, ge=0, le=1e8, allow_inf_nan=False, description=_FUSED_DESCRIPTION
+    )
+    network: str | None = Field(
+        default=None, min_length=1, max_length=200, description=_NETWORK_DESCRIPTION
+    )
+    crs: _CRS = Field(default="wgs84", description=_CRS_DESCRIPTION)
+    options: MatchOptions | None = Field(
+        default=None, description="Matcher parameters to override for this request."
+    )
+
+
+class MatchRequest(MatchEnvelope):
     """The JSON body of ``POST /v1/match`` (Content-Type ``application/json``)."""
 
     model_config = ConfigDict(
@@ -243,19 +271,6 @@ class MatchRequest(BaseModel):
             "The fixes, at least 2 with distinct times, at most the server's limit "
             "(MAPMATCH_MAX_POINTS, 100 000 by default; more is a 413)."
         ),
-    )
-    trace_id: str = Field(
-        default="trace", min_length=1, max_length=200, description="Name of the trace."
-    )
-    fused_distance_m: float | None = Field(
-        default=None, ge=0, le=1e8, allow_inf_nan=False, description=_FUSED_DESCRIPTION
-    )
-    network: str | None = Field(
-        default=None, min_length=1, max_length=200, description=_NETWORK_DESCRIPTION
-    )
-    crs: _CRS = Field(default="wgs84", description=_CRS_DESCRIPTION)
-    options: MatchOptions | None = Field(
-        default=None, description="Matcher parameters to override for this request."
     )
 
 
@@ -291,7 +306,19 @@ class MatchQuery(MatchOptions):
 # --------------------------------------------------------------------------- response
 
 
-class EdgeOut(BaseModel):
+class _Out(BaseModel):
+    """
+    A part of the match answer, as ``MatchResult.to_geojson()`` writes it.
+
+    Unknown members are refused, so validating a real answer against these models (the test
+    suite does) catches a member the output has and the documentation lacks, and a documented
+    one the output lost; OpenAPI says ``additionalProperties: false`` accordingly.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+
+class EdgeOut(_Out):
     """One directed edge of a matched path and the stretch of it that was driven."""
 
     u: int = Field(description="OSM node id where the edge starts.")
@@ -303,21 +330,21 @@ class EdgeOut(BaseModel):
     end_offset_m: float = Field(description="End of the driven stretch from u, metres.")
 
 
-class LineStringGeometry(BaseModel):
+class LineStringGeometry(_Out):
     """GeoJSON LineString in WGS84 [lon, lat]."""
 
     type: Literal["LineString"] = Field(description="Always LineString.")
     coordinates: list[list[float]] = Field(description="[lon, lat] pairs in driving order.")
 
 
-class PointGeometry(BaseModel):
+class PointGeometry(_Out):
     """GeoJSON Point in WGS84 [lon, lat]."""
 
     type: Literal["Point"] = Field(description="Always Point.")
     coordinates: list[float] = Field(description="[lon, lat] of the snapped position.")
 
 
-class SegmentProperties(BaseModel):
+class SegmentProperties(_Out):
     """Properties of a segment Feature."""
 
     kind: Literal["segment"] = Field(description="Marks a segment Feature.")
@@ -327,7 +354,7 @@ class SegmentProperties(BaseModel):
     edges: list[EdgeOut] = Field(description="Edges driven, in order.")
 
 
-class SegmentFeature(BaseModel):
+class SegmentFeature(_Out):
     """A connected matched piece of the trace; a break starts a new one."""
 
     type: Literal["Feature"] = Field(description="Always Feature.")
@@ -335,7 +362,7 @@ class SegmentFeature(BaseModel):
     properties: SegmentProperties = Field(description="What the segment covers and drove.")
 
 
-class PointProperties(BaseModel):
+class PointProperties(_Out):
     """Properties of a point Feature (one per point, after sorting by time)."""
 
     kind: Literal["point"] = Field(description="Marks a point Feature.")
@@ -354,7 +381,7 @@ class PointProperties(BaseModel):
     outlier: bool = Field(description="Judged an outlier.")
 
 
-class PointFeature(BaseModel):
+class PointFeature(_Out):
     """One input point at its snapped position (null geometry when unmatched)."""
 
     type: Literal["Feature"] = Field(description="Always Feature.")
@@ -362,7 +389,7 @@ class PointFeature(BaseModel):
     properties: PointProperties = Field(description="How the point was matched.")
 
 
-class DistanceCheckOut(BaseModel):
+class DistanceCheckOut(_Out):
     """The fused trip distance held against the matched road length."""
 
     matched_length_m: float = Field(description="Road distance along the matched path, m.")
@@ -384,7 +411,7 @@ class DistanceCheckOut(BaseModel):
     uturns: int = Field(description="U-turns on the matched path.")
 
 
-class StatsOut(BaseModel):
+class StatsOut(_Out):
     """Counts and timings of the match."""
 
     points: int = Field(description="Points after sorting and merging true duplicates.")
@@ -413,7 +440,7 @@ class StatsOut(BaseModel):
     warnings: list[str] = Field(description="What validation did to the input, one sentence each.")
 
 
-class NetworkRef(BaseModel):
+class NetworkRef(_Out):
     """The network matched on."""
 
     id: str = Field(description="Network id.")
@@ -421,7 +448,7 @@ class NetworkRef(BaseModel):
     crs: str = Field(description="Metric CRS used internally (EPSG code).")
 
 
-class MatchResponse(BaseModel):
+class MatchResponse(_Out):
     """A GeoJSON FeatureCollection: one Feature per segment, then one per point."""
 
     type: Literal["FeatureCollection"] = Field(description="Always FeatureCollection.")

@@ -29,8 +29,8 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final, TypeVar
 
-import numpy as np
 from pydantic import ValidationError
+from pydantic_core import from_json
 
 import mapmatch
 from api.errors import (
@@ -44,7 +44,7 @@ from api.errors import (
     TooManyPointsError,
     UnsupportedMediaTypeError,
 )
-from api.schemas import MatchQuery, MatchRequest
+from api.schemas import MatchEnvelope, MatchQuery
 from mapmatch import OVERRIDABLE, ConfigError, InvalidTraceError, MatchConfig, TraceFileError
 
 if TYPE_CHECKING:
@@ -54,7 +54,6 @@ if TYPE_CHECKING:
     from starlette.requests import Request
 
     from api.networks import NetworkRegistry
-    from api.schemas import PointIn
     from api.settings import Settings
 
 __all__ = [
@@ -63,6 +62,7 @@ __all__ = [
     "MatchRunner",
     "MatchService",
     "body_format",
+    "parse_json",
     "read_body",
     "validation_error",
 ]
@@ -288,28 +288,35 @@ class MatchService:
     def _from_json(
         self, body: bytes, query: MatchQuery
     ) -> tuple[mapmatch.Trace, str | None, float | None, dict[str, object]]:
+        doc = parse_json(body)
+        if not isinstance(doc, dict):
+            msg = (
+                'the body must be a JSON object {"points": [{"time", "lat", "lon"}, ...]} '
+                f"(got {_shown(doc)})"
+            )
+            raise RequestFieldError(msg)
+        points = doc.pop("points", None)
         try:
-            request = MatchRequest.model_validate_json(body)
+            envelope = MatchEnvelope.model_validate(doc)
         except ValidationError as exc:
             raise validation_error(exc.errors(include_url=False)) from None
-        given = request.model_fields_set
+        given = envelope.model_fields_set
         for name in ("network", "trace_id", "fused_distance_m", "crs"):
             if name in given and getattr(query, name) is not None:
                 msg = f"{name} is given both in the body and in the query; give it once"
                 raise RequestFieldError(msg, field=name)
-        body_options = request.options.overrides() if request.options else {}
+        body_options = envelope.options.overrides() if envelope.options else {}
         query_options = query.options()
         twice = sorted(set(body_options) & set(query_options))
         if twice:
             msg = f"option(s) {twice} given both in the body and in the query; give each once"
             raise OptionError(msg, field=f"options.{twice[0]}")
-        if len(request.points) > self.max_points:
-            raise _too_many(len(request.points), self.max_points)
-        trace_id = request.trace_id if "trace_id" in given else (query.trace_id or "trace")
-        crs = request.crs if "crs" in given else (query.crs or "wgs84")
-        trace = _trace_from_points(request.points, trace_id=trace_id, crs=crs)
-        network_id = request.network if "network" in given else query.network
-        fused = request.fused_distance_m if "fused_distance_m" in given else query.fused_distance_m
+        _check_points(points, self.max_points)
+        trace_id = envelope.trace_id if "trace_id" in given else (query.trace_id or "trace")
+        crs = envelope.crs if "crs" in given else (query.crs or "wgs84")
+        trace = _trace_from_records(points, trace_id=trace_id, crs=crs)
+        network_id = envelope.network if "network" in given else query.network
+        fused = envelope.fused_distance_m if "fused_distance_m" in given else query.fused_distance_m
         return trace, network_id, fused, {**body_options, **query_options}
 
     def _from_file(self, body: bytes, fmt: str, query: MatchQuery) -> mapmatch.Trace:
@@ -347,32 +354,71 @@ def _config(overrides: Mapping[str, object]) -> MatchConfig:
         raise OptionError(str(exc), field=field) from None
 
 
-def _column(points: Sequence[PointIn], name: str) -> np.ndarray | None:
-    values = [getattr(p, name) for p in points]
-    if all(v is None for v in values):
-        return None
-    return np.array([np.nan if v is None else v for v in values], dtype=np.float64)
+def parse_json(body: bytes) -> object:
+    """
+    The JSON document of a body, parsed once, in bounded time and depth.
+
+    ``NaN`` and ``Infinity`` are read (as numbers the trace reader then refuses, naming the
+    point); nesting deeper than 200 levels and integers of more than 4,300 digits are refused.
+
+    Raises
+    ------
+    InvalidJSONError
+        The body is not JSON, or is nested too deep, or holds a number too long.
+
+    Examples
+    --------
+    >>> parse_json(b'{"points": [{"lat": NaN}]}')
+    {'points': [{'lat': nan}]}
+    """
+    try:
+        return from_json(body, allow_inf_nan=True)
+    except ValueError as exc:
+        msg = f"the body is not valid JSON: {exc}"
+        raise InvalidJSONError(msg) from None
 
 
-def _trace_from_points(points: Sequence[PointIn], *, trace_id: str, crs: str) -> mapmatch.Trace:
-    times = [p.time for p in points]
-    time_col: object = times
-    if all(t is None for t in times):
-        time_col = None  # no times at all: the trace is matched by distance only
-    elif all(isinstance(t, float | int) for t in times):
-        time_col = np.array(times, dtype=np.float64)
-    return mapmatch.Trace(
-        time=time_col,
-        lon=np.array([p.lon for p in points], dtype=np.float64),
-        lat=np.array([p.lat for p in points], dtype=np.float64),
-        heading=_column(points, "heading"),
-        speed=_column(points, "speed"),
-        accuracy=_column(points, "accuracy"),
-        hdop=_column(points, "hdop"),
-        odometer=_column(points, "odometer"),
-        trace_id=trace_id,
-        crs=crs,
-    )
+def _check_points(points: object, limit: int) -> None:
+    """The ``points`` member is a list of 2 .. ``limit`` items (the items: the reader's job)."""
+    if points is None:
+        msg = 'the body has no "points": send {"points": [{"time", "lat", "lon"}, ...]}'
+        raise InvalidTraceError(msg, field="points")
+    if not isinstance(points, list):
+        msg = f'"points" must be a list of point objects (got {_shown(points)})'
+        raise InvalidTraceError(msg, field="points")
+    if len(points) < 2:
+        msg = f'"points" holds {len(points)} point(s); a trace needs at least 2'
+        raise InvalidTraceError(msg, field="points")
+    if len(points) > limit:
+        raise _too_many(len(points), limit)
+
+
+def _trace_from_records(points: list[object], *, trace_id: str, crs: str) -> mapmatch.Trace:
+    """
+    The JSON points read by the library's own reader, errors naming ``points[i].field``.
+
+    Raises
+    ------
+    InvalidTraceError
+        A point breaks a rule; ``field`` is ``points[i].name`` for the first offending point.
+    """
+    try:
+        return mapmatch.Trace.from_records(points, trace_id=trace_id, crs=crs)  # type: ignore[arg-type]
+    except InvalidTraceError as exc:
+        field = exc.field
+        if exc.rows:
+            field = f"points[{exc.rows[0]}]" + (f".{exc.field}" if exc.field else "")
+        raise InvalidTraceError(
+            str(exc), trace_id=exc.trace_id, field=field, rows=exc.rows
+        ) from None
+    except TraceFileError as exc:
+        raise InvalidTraceError(str(exc), trace_id=trace_id, field="points") from None
+    except OverflowError:  # a whole number too large for a float (10**400 as a latitude)
+        msg = (
+            f"trace {trace_id!r}: a number in the points is too large to be a coordinate, "
+            "time or measurement; send decimal numbers in their units"
+        )
+        raise InvalidTraceError(msg, trace_id=trace_id, field="points") from None
 
 
 def _where(loc: Iterable[int | str]) -> str:

@@ -29,10 +29,16 @@ import json
 import os
 from typing import Annotated, Literal
 
-from pydantic import Field, SecretStr, field_validator
+from pydantic import Field, SecretStr, ValidationError, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
-__all__ = ["Settings"]
+from mapmatch.errors import ConfigError
+
+__all__ = ["Settings", "SettingsError", "load_settings"]
+
+
+class SettingsError(ConfigError):
+    """A deployment setting (command-line option or ``MAPMATCH_*`` variable) is invalid."""
 
 
 class Settings(BaseSettings):
@@ -101,3 +107,35 @@ class Settings(BaseSettings):
         if value is not None and not value.get_secret_value().strip():
             return None
         return value
+
+
+def load_settings(**given: object) -> Settings:
+    """
+    The settings: ``given`` values first, then the ``MAPMATCH_*`` environment, then defaults.
+
+    Raises
+    ------
+    SettingsError
+        A value is invalid; one line naming the setting, its variable and the value.
+
+    Examples
+    --------
+    >>> load_settings(max_points=500).max_points
+    500
+    >>> load_settings(max_points=1)
+    Traceback (most recent call last):
+    ...
+    api.settings.SettingsError: invalid setting max_points (MAPMATCH_MAX_POINTS): Input should be greater than or equal to 2 (got 1)
+    """  # noqa: E501
+    try:
+        return Settings(**given)  # type: ignore[arg-type]
+    except ValidationError as exc:
+        first = exc.errors(include_url=False)[0]
+        name = ".".join(str(part) for part in first["loc"]) or "settings"
+        problems = len(exc.errors())
+        more = f" (and {problems - 1} more)" if problems > 1 else ""
+        shown = repr(first["input"]) if name != "token" else "<hidden>"
+        msg = (
+            f"invalid setting {name} (MAPMATCH_{name.upper()}): {first['msg']} (got {shown}){more}"
+        )
+        raise SettingsError(msg, field=name) from None

@@ -1,32 +1,54 @@
 """
-``mapmatch serve``: run the HTTP matching service (uvicorn, ``api.main:app``).
+``mapmatch serve``: run the HTTP matching service.
 
-This module never imports :mod:`api` (the core does not depend on the HTTP layer): it passes
-its options to the app through ``MAPMATCH_*`` environment variables, which every worker process
-reads when it imports ``api.main``. Before starting uvicorn it compiles any network missing
-from the cache, so that the workers all memory-map one cached copy instead of each compiling
-its own, and so that a bad ``--network`` fails here with one line instead of in every worker.
+The one surface of :mod:`mapmatch` that imports the HTTP layer (import-linter allows exactly
+this edge): it builds the service's :class:`api.settings.Settings` from the command line and
+the ``MAPMATCH_*`` environment, validated once here, and hands that object to
+:func:`api.server.serve`, which runs the app factory :func:`api.app.create_app` with it in
+every worker. Before starting it compiles any network missing from the cache, so that the
+workers all memory-map one cached copy instead of each compiling its own, and so that a bad
+``--network`` or setting fails here with one line (exit 2) instead of in every worker.
 """
 
 from __future__ import annotations
 
-import json
+import argparse
 import os
-import shutil
-import tempfile
 from typing import TYPE_CHECKING, Any
 
 import roadnets
-from mapmatch.errors import ConfigError
 
 if TYPE_CHECKING:
-    import argparse
+    from api.settings import Settings
 
-__all__ = ["APP", "add_parser", "run", "settings_environment"]
+__all__ = ["add_parser", "run", "settings_from_args"]
 
-#: Import string of the ASGI app uvicorn runs.
-APP = "api.main:app"
-_MULTIPROC_ENV = "PROMETHEUS_MULTIPROC_DIR"
+#: Command-line options that are :class:`api.settings.Settings` fields of the same name.
+_SETTING_OPTIONS = ("max_body_bytes", "max_points", "time_budget_s", "match_threads", "token")
+
+
+def _port(text: str) -> int:
+    """A TCP port number, 0 .. 65535 (0: any free port)."""
+    try:
+        port = int(text)
+    except ValueError:
+        port = -1
+    if not 0 <= port <= 65535:
+        msg = f"must be a TCP port 0..65535 (got {text!r})"
+        raise argparse.ArgumentTypeError(msg)
+    return port
+
+
+def _workers(text: str) -> int:
+    """A worker count >= 1."""
+    try:
+        count = int(text)
+    except ValueError:
+        count = 0
+    if count < 1:
+        msg = f"must be a whole number >= 1 (got {text!r})"
+        raise argparse.ArgumentTypeError(msg)
+    return count
 
 
 def add_parser(sub: Any) -> None:
@@ -37,7 +59,8 @@ def add_parser(sub: Any) -> None:
         description=(
             "Serve POST /v1/match, GET /v1/networks, /healthz, /readyz, /metrics and the "
             "OpenAPI docs at /docs. Every option can also be set as a MAPMATCH_* environment "
-            "variable (MAPMATCH_TOKEN keeps the token out of the process list)."
+            "variable (MAPMATCH_TOKEN keeps the token out of the process list); see "
+            "api/settings.py for all of them."
         ),
     )
     parser.add_argument(
@@ -50,9 +73,9 @@ def add_parser(sub: Any) -> None:
         "default: the embedded network)",
     )
     parser.add_argument("--host", default="127.0.0.1", help="bind address (default 127.0.0.1)")
-    parser.add_argument("--port", type=int, default=8000, help="TCP port (default 8000)")
+    parser.add_argument("--port", type=_port, default=8000, help="TCP port (default 8000)")
     parser.add_argument(
-        "--workers", type=int, default=1, help="worker processes (default 1)", metavar="N"
+        "--workers", type=_workers, default=1, help="worker processes (default 1)", metavar="N"
     )
     parser.add_argument("--cache-dir", default=None, help="folder of compiled networks")
     parser.add_argument(
@@ -76,76 +99,39 @@ def add_parser(sub: Any) -> None:
     parser.set_defaults(run=run)
 
 
-def settings_environment(args: argparse.Namespace) -> dict[str, str]:
+def settings_from_args(args: argparse.Namespace) -> Settings:
     """
-    The ``MAPMATCH_*`` variables that carry the command-line options to the app.
+    The service's settings: the options given on the command line, else ``MAPMATCH_*``.
 
-    Only options given on the command line are set, so variables already in the environment
-    keep working. Networks travel as ``os.pathsep``-separated paths made absolute.
+    Networks and the cache folder are made absolute.
 
-    Examples
-    --------
-    >>> import argparse
-    >>> ns = argparse.Namespace(networks=None, cache_dir=None, token=None, max_body_bytes=None,
-    ...                         max_points=500, time_budget_s=None, match_threads=None,
-    ...                         no_access_log=True)
-    >>> settings_environment(ns)
-    {'MAPMATCH_MAX_POINTS': '500', 'MAPMATCH_ACCESS_LOG': 'false'}
+    Raises
+    ------
+    api.settings.SettingsError
+        A value is invalid (one line naming the setting).
     """
-    env: dict[str, str] = {}
+    from api.settings import load_settings
+
+    given: dict[str, object] = {}
     if args.networks:
-        env["MAPMATCH_NETWORKS"] = os.pathsep.join(os.path.abspath(p) for p in args.networks)
+        given["networks"] = tuple(os.path.abspath(p) for p in args.networks)
     if args.cache_dir is not None:
-        env["MAPMATCH_CACHE_DIR"] = os.path.abspath(args.cache_dir)
-    if args.token is not None:
-        env["MAPMATCH_TOKEN"] = args.token
-    for name in ("max_body_bytes", "max_points", "time_budget_s", "match_threads"):
+        given["cache_dir"] = os.path.abspath(args.cache_dir)
+    for name in _SETTING_OPTIONS:
         value = getattr(args, name)
         if value is not None:
-            env[f"MAPMATCH_{name.upper()}"] = str(value)
+            given[name] = value
     if args.no_access_log:
-        env["MAPMATCH_ACCESS_LOG"] = "false"
-    return env
+        given["access_log"] = False
+    return load_settings(**given)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Compile missing networks into the cache, then run uvicorn until interrupted."""
-    import uvicorn
+    """Compile missing networks into the cache, then serve until interrupted."""
+    from api.server import serve
 
-    if args.workers < 1:
-        msg = f"--workers must be >= 1 (got {args.workers})"
-        raise ConfigError(msg)
-    os.environ.update(settings_environment(args))
-    cache_dir = os.environ.get("MAPMATCH_CACHE_DIR") or None
-    sources: list[str | None] = [*_network_sources(os.environ.get("MAPMATCH_NETWORKS", ""))]
-    for source in sources or [None]:
-        roadnets.load(source, cache_dir=cache_dir)  # fills the cache; errors end here, exit 2
-
-    multiproc_dir = None
-    if args.workers > 1 and not os.environ.get(_MULTIPROC_ENV):
-        # Workers then write their metrics there and /metrics sums them (see api.metrics).
-        multiproc_dir = tempfile.mkdtemp(prefix="mapmatch-metrics-")
-        os.environ[_MULTIPROC_ENV] = multiproc_dir
-    try:
-        uvicorn.run(
-            APP,
-            host=args.host,
-            port=args.port,
-            workers=args.workers,
-            access_log=False,  # the app writes its own JSON access log
-            log_level=args.log_level,
-            timeout_graceful_shutdown=10,
-        )
-    finally:
-        if multiproc_dir is not None:
-            os.environ.pop(_MULTIPROC_ENV, None)
-            shutil.rmtree(multiproc_dir, ignore_errors=True)
+    settings = settings_from_args(args)
+    for source in settings.networks or (None,):
+        roadnets.load(source, cache_dir=settings.cache_dir)  # fills the cache; errors: exit 2
+    serve(settings, host=args.host, port=args.port, workers=args.workers, log_level=args.log_level)
     return 0
-
-
-def _network_sources(value: str) -> list[str]:
-    """``MAPMATCH_NETWORKS`` as api.settings reads it: a JSON list or ``os.pathsep``-separated."""
-    text = value.strip()
-    if text.startswith("["):
-        return [str(p) for p in json.loads(text)]
-    return [p for p in text.split(os.pathsep) if p.strip()]

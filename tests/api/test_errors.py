@@ -89,7 +89,12 @@ CASES: dict[str, Case] = {
         [0],
     ),
     "unparsable time string": Case(
-        lambda p, c: _body(points=_with(p, 2, time="yesterday")), 422, "invalid_trace", "time"
+        lambda p, c: _body(points=_with(p, 2, time="yesterday")),
+        422,
+        "invalid_trace",
+        "points[2].time",
+        [2],
+        says="yesterday",
     ),
     "empty trace": Case(lambda p, c: _body(points=[]), 422, "invalid_trace", "points", says="2"),
     "single point": Case(lambda p, c: _body(points=p[:1]), 422, "invalid_trace", "points"),
@@ -97,7 +102,7 @@ CASES: dict[str, Case] = {
         lambda p, c: _body(points=[p[0], {k: v for k, v in p[1].items() if k != "time"}, p[2]]),
         422,
         "invalid_trace",
-        "time",
+        "points[1].time",
         [1],
         says="leave the time column out",
     ),

@@ -1,0 +1,127 @@
+"""
+What a route needs from the app, handed to it per request (FastAPI dependencies).
+
+Routes declare what they use (``settings: SettingsDep``, ``networks: ReadyNetworksDep`` ...)
+instead of reaching into ``request.app.state``; the objects live on the app that
+:func:`api.app.create_app` built, one set per app, so several apps can share a process.
+
+Authentication is checked here too (:class:`BearerToken`), but it is applied by
+:class:`api.middleware.ServiceMiddleware` to every path, the documentation pages, their static
+files and unknown routes included: a route-level dependency would leave the mounts open and let
+a 404 tell a caller without a token which routes exist.
+"""
+
+from __future__ import annotations
+
+import secrets
+from typing import Annotated
+
+from fastapi import Depends, Request
+
+from api.errors import UnauthorizedError
+from api.metrics import ServiceMetrics
+from api.networks import NetworkRegistry
+from api.service import MatchService
+from api.settings import Settings
+
+__all__ = [
+    "BearerToken",
+    "MetricsDep",
+    "NetworksDep",
+    "ReadyNetworksDep",
+    "ServiceDep",
+    "SettingsDep",
+    "get_metrics",
+    "get_networks",
+    "get_service",
+    "get_settings",
+    "ready_networks",
+]
+
+
+def get_settings(request: Request) -> Settings:
+    """The deployment settings of the app serving ``request``."""
+    value: Settings = request.app.state.settings
+    return value
+
+
+def get_networks(request: Request) -> NetworkRegistry:
+    """The app's networks, loaded or not."""
+    value: NetworkRegistry = request.app.state.networks
+    return value
+
+
+def ready_networks(request: Request) -> NetworkRegistry:
+    """
+    The app's networks, once every one is loaded.
+
+    Raises
+    ------
+    NotReadyError
+        Still loading (503 ``not_ready``), before any body is read.
+    RoadNetworkError
+        Loading failed (503 ``network_unavailable``).
+    """
+    networks = get_networks(request)
+    networks.get(None)
+    return networks
+
+
+def get_service(request: Request) -> MatchService:
+    """The app's match service (its thread pool and limits)."""
+    value: MatchService = request.app.state.service
+    return value
+
+
+def get_metrics(request: Request) -> ServiceMetrics:
+    """The app's Prometheus metrics."""
+    value: ServiceMetrics = request.app.state.metrics
+    return value
+
+
+SettingsDep = Annotated[Settings, Depends(get_settings)]
+NetworksDep = Annotated[NetworkRegistry, Depends(get_networks)]
+ReadyNetworksDep = Annotated[NetworkRegistry, Depends(ready_networks)]
+ServiceDep = Annotated[MatchService, Depends(get_service)]
+MetricsDep = Annotated[ServiceMetrics, Depends(get_metrics)]
+
+
+class BearerToken:
+    """
+    The bearer token a server requires, compared in constant time.
+
+    Examples
+    --------
+    >>> check = BearerToken("s3cret")
+    >>> check.problem("Bearer s3cret") is None
+    True
+    >>> check.problem("Basic czNjcmV0")
+    "the Authorization header must be 'Bearer <token>'"
+    """
+
+    def __init__(self, token: str) -> None:
+        self._token = token.encode()
+
+    def problem(self, header: str | None) -> str | None:
+        """What is wrong with an ``Authorization`` header, or ``None`` when it is right."""
+        if not header:
+            return "this service requires a bearer token: send 'Authorization: Bearer <token>'"
+        scheme, _, credentials = header.partition(" ")
+        if scheme.lower() != "bearer" or not credentials.strip():
+            return "the Authorization header must be 'Bearer <token>'"
+        if not secrets.compare_digest(credentials.strip().encode(), self._token):
+            return "the bearer token is wrong"
+        return None
+
+    def check(self, header: str | None) -> None:
+        """
+        Raise when the header is not the token.
+
+        Raises
+        ------
+        UnauthorizedError
+            Missing, malformed or wrong (401 ``unauthorized``).
+        """
+        problem = self.problem(header)
+        if problem is not None:
+            raise UnauthorizedError(problem)
