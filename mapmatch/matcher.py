@@ -169,6 +169,7 @@ def match(
         distance_check=check,
         stats=stats,
         diagnostics=_diagnostics(net, obs, solution) if diagnostics else None,
+        config=config,
     )
 
 
@@ -186,7 +187,7 @@ def _uturns(net: RoadNetwork, segments: list[Segment]) -> int:
     twin = net.arrays.edge_twin
     total = 0
     for segment in segments:
-        edges = np.array([e.edge for e in segment.edges], dtype=np.int64)
+        edges = segment.edge
         total += int(np.count_nonzero(twin[edges[:-1]] == edges[1:]))
     return total
 

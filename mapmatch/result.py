@@ -1,24 +1,35 @@
-"""What a match returns: segments of driven edges, snapped points, length and its check."""
+"""What a match returns: segments of driven edges, snapped points, length and its check.
+
+The result holds arrays; every serialised form of it (GeoJSON, tables, GeoDataFrames, the
+batch's files) is made by :mod:`mapmatch.export` when asked for. A segment's per-edge objects,
+road attributes and geometry are read from the network on first use, so a match that only
+needs its length or its points never builds them.
+"""
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import numpy.typing as npt
 
 if TYPE_CHECKING:
     import pandas as pd
 
+    from mapmatch.config import MatchConfig
     from mapmatch.distance import DistanceCheck
+    from mapmatch.types import BoolArray, FloatArray, IntArray
+    from roadnets import RoadNetwork
 
-__all__ = ["Diagnostics", "MatchResult", "MatchStats", "MatchedEdge", "MatchedPoints", "Segment"]
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
+__all__ = [
+    "Diagnostics",
+    "EdgeAttributes",
+    "MatchResult",
+    "MatchStats",
+    "MatchedEdge",
+    "MatchedPoints",
+    "Segment",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -28,7 +39,9 @@ class MatchedEdge:
 
     ``u``/``v`` are OSM node ids and ``key`` tells parallel edges apart; ``edge`` is the
     edge's index in the network's arrays. ``start_offset_m``/``end_offset_m`` bound the
-    driven stretch, metres from the edge's start.
+    driven stretch, metres from the edge's start. ``name`` is the street's ``name`` (else its
+    ``ref``; empty when the way has neither), ``road_class`` its OSM ``highway`` value and
+    ``speed_limit_kph`` its ``maxspeed`` (the road class's default where it is not tagged).
     """
 
     edge: int
@@ -39,6 +52,9 @@ class MatchedEdge:
     length_m: float
     start_offset_m: float
     end_offset_m: float
+    name: str = ""
+    road_class: str = ""
+    speed_limit_kph: float = float("nan")
 
     @property
     def driven_m(self) -> float:
@@ -46,37 +62,219 @@ class MatchedEdge:
         return self.end_offset_m - self.start_offset_m
 
     def to_dict(self) -> dict[str, Any]:
-        """The edge as DESIGN.md's output schema has it."""
+        """The edge's fields as plain Python values (``osm_way_ids`` a list)."""
         return {
+            "edge": self.edge,
             "u": self.u,
             "v": self.v,
             "key": self.key,
             "osm_way_ids": list(self.osm_way_ids),
-            "length_m": round(self.length_m, 3),
-            "start_offset_m": round(self.start_offset_m, 3),
-            "end_offset_m": round(self.end_offset_m, 3),
+            "length_m": self.length_m,
+            "start_offset_m": self.start_offset_m,
+            "end_offset_m": self.end_offset_m,
+            "name": self.name,
+            "road_class": self.road_class,
+            "speed_limit_kph": self.speed_limit_kph,
         }
 
 
 @dataclass(frozen=True, slots=True)
+class EdgeAttributes:
+    """
+    What the network says about each edge of a segment's path, one entry per stretch.
+
+    ``u``/``v``/``key`` are the OSM ids of the edge, ``way_id`` its OSM way, ``length_m``
+    its whole length, ``speed_limit_kph`` the ``maxspeed`` (or the class default),
+    ``road_class`` the ``highway`` value and ``name`` the street name (``""`` for none).
+    """
+
+    u: IntArray
+    v: IntArray
+    key: IntArray
+    way_id: IntArray
+    length_m: FloatArray
+    speed_limit_kph: FloatArray
+    road_class: tuple[str, ...]
+    name: tuple[str, ...]
+
+    @classmethod
+    def of_edges(cls, net: RoadNetwork, edge: IntArray) -> EdgeAttributes:
+        """Read the attributes of network edges ``edge`` (array of edge indices)."""
+        from roadnets.drivable import ROAD_CLASSES
+
+        a = net.arrays
+        u, v, key = net.edge_osm_ids(edge)
+        way = np.asarray(a.edge_way_id[edge], dtype=np.int64)
+        classes = np.asarray(ROAD_CLASSES, dtype=object)[a.edge_class[edge]]
+        return cls(
+            u=np.asarray(u, dtype=np.int64),
+            v=np.asarray(v, dtype=np.int64),
+            key=np.asarray(key, dtype=np.int64),
+            way_id=way,
+            length_m=np.asarray(a.edge_length_m[edge], dtype=np.float64),
+            speed_limit_kph=np.asarray(a.edge_speed_mps[edge], dtype=np.float64) * 3.6,
+            road_class=tuple(classes.tolist()),
+            name=tuple(net.way_names.names_of(way)),
+        )
+
+
 class Segment:
     """
     A connected matched piece of the trace: fixes ``first..last`` and the path driven.
 
-    ``lon``/``lat`` trace the path's geometry (WGS84) in driving order.
+    The path is held as arrays: stretch ``i`` runs along network edge ``edge[i]`` from
+    ``start_offset_m[i]`` to ``end_offset_m[i]`` (metres from the edge's start). The
+    per-edge objects (:attr:`edges`), the road attributes (:attr:`attributes`) and the
+    geometry (:attr:`lon`/:attr:`lat`, WGS84, driving order) are read from the network on
+    first use. A pickled segment carries them, not the network.
+
+    Parameters
+    ----------
+    index, first, last
+        Position of the segment in the result, and its first and last fix.
+    edge, start_offset_m, end_offset_m
+        The stretches of the path.
+    net
+        The network matched on; ``None`` only when ``attributes``, ``lon`` and ``lat`` are
+        given.
+    attributes, lon, lat
+        Already known attributes and geometry (an unpickled segment).
     """
 
-    index: int
-    first: int
-    last: int
-    edges: list[MatchedEdge]
-    lon: FloatArray
-    lat: FloatArray
+    __slots__ = (
+        "_attributes",
+        "_edges",
+        "_lat",
+        "_lon",
+        "_net",
+        "edge",
+        "end_offset_m",
+        "first",
+        "index",
+        "last",
+        "start_offset_m",
+    )
+
+    def __init__(
+        self,
+        index: int,
+        first: int,
+        last: int,
+        edge: IntArray,
+        start_offset_m: FloatArray,
+        end_offset_m: FloatArray,
+        *,
+        net: RoadNetwork | None = None,
+        attributes: EdgeAttributes | None = None,
+        lon: FloatArray | None = None,
+        lat: FloatArray | None = None,
+    ) -> None:
+        if net is None and (attributes is None or lon is None or lat is None):
+            msg = "Segment needs the network, or its attributes and geometry"
+            raise ValueError(msg)
+        self.index, self.first, self.last = int(index), int(first), int(last)
+        self.edge = np.asarray(edge, dtype=np.int64)
+        self.start_offset_m = np.asarray(start_offset_m, dtype=np.float64)
+        self.end_offset_m = np.asarray(end_offset_m, dtype=np.float64)
+        self._net = net
+        self._attributes = attributes
+        self._lon, self._lat = lon, lat
+        self._edges: list[MatchedEdge] | None = None
+
+    def __repr__(self) -> str:
+        return (
+            f"<Segment {self.index}: fixes {self.first}-{self.last}, {len(self.edge)} edges, "
+            f"{self.length_m:,.1f} m>"
+        )
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        path = (
+            self.index,
+            self.first,
+            self.last,
+            self.edge,
+            self.start_offset_m,
+            self.end_offset_m,
+        )
+        known = {"attributes": self.attributes, "lon": self.lon, "lat": self.lat}
+        return (_restore_segment, (path, known))
 
     @property
     def length_m(self) -> float:
         """Metres along the path, from the first fix's projection to the last's."""
-        return float(sum(e.driven_m for e in self.edges))
+        return float(sum((self.end_offset_m - self.start_offset_m).tolist()))
+
+    @property
+    def driven_m(self) -> FloatArray:
+        """Metres driven on each edge of the path."""
+        return self.end_offset_m - self.start_offset_m
+
+    @property
+    def attributes(self) -> EdgeAttributes:
+        """OSM ids, way, length, speed limit, road class and name of each edge."""
+        if self._attributes is None:
+            assert self._net is not None  # checked in __init__
+            self._attributes = EdgeAttributes.of_edges(self._net, self.edge)
+        return self._attributes
+
+    @property
+    def edges(self) -> list[MatchedEdge]:
+        """The driven edges as objects, in driving order."""
+        if self._edges is None:
+            a = self.attributes
+            self._edges = [
+                MatchedEdge(
+                    edge=e,
+                    u=u,
+                    v=v,
+                    key=k,
+                    osm_way_ids=(w,),
+                    length_m=length,
+                    start_offset_m=lo,
+                    end_offset_m=hi,
+                    name=name,
+                    road_class=cls,
+                    speed_limit_kph=limit,
+                )
+                for e, u, v, k, w, length, lo, hi, name, cls, limit in zip(
+                    self.edge.tolist(),
+                    a.u.tolist(),
+                    a.v.tolist(),
+                    a.key.tolist(),
+                    a.way_id.tolist(),
+                    a.length_m.tolist(),
+                    self.start_offset_m.tolist(),
+                    self.end_offset_m.tolist(),
+                    a.name,
+                    a.road_class,
+                    a.speed_limit_kph.tolist(),
+                    strict=True,
+                )
+            ]
+        return self._edges
+
+    def _geometry(self) -> tuple[FloatArray, FloatArray]:
+        if self._lon is None or self._lat is None:
+            net = self._net
+            assert net is not None  # checked in __init__
+            x, y = net.path_polyline(self.edge, self.start_offset_m, self.end_offset_m)
+            self._lon, self._lat = net.unproject(x, y)
+        return self._lon, self._lat
+
+    @property
+    def lon(self) -> FloatArray:
+        """Longitudes of the path's vertices, WGS84 degrees, in driving order."""
+        return self._geometry()[0]
+
+    @property
+    def lat(self) -> FloatArray:
+        """Latitudes of the path's vertices, WGS84 degrees, in driving order."""
+        return self._geometry()[1]
+
+
+def _restore_segment(args: tuple[Any, ...], known: dict[str, Any]) -> Segment:
+    """Rebuild a pickled :class:`Segment` (its attributes and geometry made already)."""
+    return Segment(*args, **known)
 
 
 @dataclass(frozen=True, slots=True)
@@ -231,108 +429,40 @@ class MatchResult:
     distance_check: DistanceCheck
     stats: MatchStats
     diagnostics: Diagnostics | None = None
+    config: MatchConfig | None = field(default=None, repr=False)
+
+    def __repr__(self) -> str:
+        p = self.points
+        return (
+            f"<MatchResult {self.trace_id!r}: {int(p.matched.sum())}/{len(p.matched)} fixes "
+            f"matched, {len(self.segments)} segment(s), {self.matched_length_m:,.1f} m, "
+            f"verdict {self.distance_check.verdict}>"
+        )
 
     def way_ids(self) -> list[int]:
         """OSM way ids driven, in order, consecutive repeats collapsed."""
         ways: list[int] = []
         for segment in self.segments:
-            for edge in segment.edges:
-                for way in edge.osm_way_ids:
-                    if not ways or ways[-1] != way:
-                        ways.append(way)
+            for way in segment.attributes.way_id.tolist():
+                if not ways or ways[-1] != way:
+                    ways.append(way)
         return ways
 
     def to_geojson(self) -> dict[str, Any]:
         """
-        The result as a GeoJSON FeatureCollection (DESIGN.md's output schema).
+        The result as a GeoJSON FeatureCollection (docs/DESIGN.md's output schema).
 
         One ``segment`` Feature per segment (LineString of the driven path) and one ``point``
-        Feature per fix (snapped Point, or null geometry when unmatched).
+        Feature per fix (snapped Point, or null geometry when unmatched). The same document
+        as text is :func:`mapmatch.export.geojson_bytes` (what the batch and the service
+        write).
         """
-        features: list[dict[str, Any]] = []
-        for seg in self.segments:
-            coords = np.column_stack((seg.lon, seg.lat)).round(7).tolist()
-            if len(coords) == 1:
-                coords = coords * 2
-            features.append(
-                {
-                    "type": "Feature",
-                    "geometry": {"type": "LineString", "coordinates": coords},
-                    "properties": {
-                        "kind": "segment",
-                        "segment": seg.index,
-                        "point_range": [seg.first, seg.last],
-                        "length_m": round(seg.length_m, 3),
-                        "edges": [e.to_dict() for e in seg.edges],
-                    },
-                }
-            )
-        p = self.points
-        for i in range(len(p.time_s)):
-            matched = bool(p.matched[i])
-            geometry = (
-                {"type": "Point", "coordinates": [round(p.lon[i], 7), round(p.lat[i], 7)]}
-                if matched
-                else None
-            )
-            features.append(
-                {
-                    "type": "Feature",
-                    "geometry": geometry,
-                    "properties": {
-                        "kind": "point",
-                        "index": i,
-                        "time": None if math.isnan(p.time_s[i]) else float(p.time_s[i]),
-                        "matched": matched,
-                        "u": int(p.u[i]) if matched else None,
-                        "v": int(p.v[i]) if matched else None,
-                        "key": int(p.key[i]) if matched else None,
-                        "offset_m": _finite(p.offset_m[i]),
-                        "distance_m": _finite(p.distance_m[i]),
-                        "confidence": round(float(p.confidence[i]), 4),
-                        "interpolated": bool(p.interpolated[i]),
-                        "outlier": bool(p.outlier[i]),
-                    },
-                }
-            )
-        return {
-            "type": "FeatureCollection",
-            "trace_id": self.trace_id,
-            "network": dict(self.network),
-            "matched_length_m": round(self.matched_length_m, 3),
-            "distance_check": self.distance_check.to_dict(),
-            "breaks": list(self.breaks),
-            "stats": self.stats.to_dict(),
-            "features": features,
-        }
+        from mapmatch.export import geojson_dict
+
+        return geojson_dict(self)
 
     def to_dataframe(self) -> pd.DataFrame:
         """The per-fix table: time, raw and snapped position, edge, offset, confidence."""
-        import pandas as pd
+        from mapmatch.export import points_frame
 
-        p = self.points
-        return pd.DataFrame(
-            {
-                "trace_id": self.trace_id,
-                "index": np.arange(len(p.time_s)),
-                "time": p.time_s,
-                "raw_lon": p.raw_lon,
-                "raw_lat": p.raw_lat,
-                "matched": p.matched,
-                "segment": p.segment,
-                "lon": p.lon,
-                "lat": p.lat,
-                "u": p.u,
-                "v": p.v,
-                "key": p.key,
-                "offset_m": p.offset_m,
-                "distance_m": p.distance_m,
-                "confidence": p.confidence,
-                "interpolated": p.interpolated,
-                "outlier": p.outlier,
-            }
-        )
-
-
-def _finite(value: float) -> float | None:
-    return None if math.isnan(value) else round(float(value), 3)
+        return points_frame(self)

@@ -4,10 +4,10 @@ Output side of batch matching: per-trace files written atomically, and ``summary
 Per trace, in the output folder:
 
 ``geojson``
-    ``<name>.geojson``: the FeatureCollection of :meth:`MatchResult.to_geojson` (DESIGN.md).
+    ``<name>.geojson``: the FeatureCollection of :func:`mapmatch.export.geojson_bytes`.
 ``csv`` / ``parquet``
-    ``<name>.csv|parquet``: the per-point table of :meth:`MatchResult.to_dataframe`, and
-    ``<name>.edges.csv|parquet``: one row per matched edge, segments in order.
+    ``<name>.csv|parquet``: the per-point table of :func:`mapmatch.export.points_frame`, and
+    ``<name>.edges.csv|parquet``: one row per matched edge (:func:`mapmatch.export.edges_frame`).
 
 Every file is written to a hidden temporary file in the same folder and renamed into place
 (``os.replace``), so a file under its final name is always complete. The sidecar is renamed
@@ -25,7 +25,6 @@ from __future__ import annotations
 import contextlib
 import csv
 import io
-import json
 import math
 import os
 import tempfile
@@ -33,10 +32,10 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from mapmatch import export
+
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable
-
-    import pandas as pd
 
     from mapmatch.result import MatchResult
 
@@ -47,7 +46,6 @@ __all__ = [
     "SummaryLog",
     "SummaryRow",
     "atomic_write",
-    "edges_dataframe",
     "output_paths",
     "outputs_complete",
     "read_summary",
@@ -296,50 +294,6 @@ def remove_temporaries(out_dir: Path) -> int:
     return removed
 
 
-def edges_dataframe(result: MatchResult) -> pd.DataFrame:
-    """
-    One row per matched edge: trace, segment, order, OSM ids, length and offsets.
-
-    ``osm_way_ids`` holds the way ids joined by ``;`` (one edge may follow several ways).
-    """
-    import pandas as pd
-
-    rows: list[dict[str, object]] = []
-    for seg in result.segments:
-        for order, edge in enumerate(seg.edges):
-            rows.append(
-                {
-                    "trace_id": result.trace_id,
-                    "segment": seg.index,
-                    "order": order,
-                    "first_point": seg.first,
-                    "last_point": seg.last,
-                    "u": int(edge.u),
-                    "v": int(edge.v),
-                    "key": int(edge.key),
-                    "osm_way_ids": ";".join(str(w) for w in edge.osm_way_ids),
-                    "length_m": float(edge.length_m),
-                    "start_offset_m": float(edge.start_offset_m),
-                    "end_offset_m": float(edge.end_offset_m),
-                }
-            )
-    columns = [
-        "trace_id",
-        "segment",
-        "order",
-        "first_point",
-        "last_point",
-        "u",
-        "v",
-        "key",
-        "osm_way_ids",
-        "length_m",
-        "start_offset_m",
-        "end_offset_m",
-    ]
-    return pd.DataFrame(rows, columns=columns)
-
-
 def write_result(result: MatchResult, out_dir: Path, name: str, fmt: str) -> None:
     """
     Write one trace's outputs atomically (sidecar first, main file last).
@@ -357,11 +311,11 @@ def write_result(result: MatchResult, out_dir: Path, name: str, fmt: str) -> Non
     """
     paths = output_paths(out_dir, name, fmt)
     if fmt == "geojson":
-        text = json.dumps(result.to_geojson(), allow_nan=False, separators=(",", ":"))
-        atomic_write(paths[0], lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
+        data = export.geojson_bytes(result) + b"\n"
+        atomic_write(paths[0], lambda tmp: tmp.write_bytes(data))
         return
-    edges = edges_dataframe(result)
-    points = result.to_dataframe()
+    edges = export.edges_frame(result)
+    points = export.points_frame(result)
     if fmt == "csv":
         atomic_write(paths[0], lambda tmp: edges.to_csv(tmp, index=False))
         atomic_write(paths[1], lambda tmp: points.to_csv(tmp, index=False))

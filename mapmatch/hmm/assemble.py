@@ -22,7 +22,7 @@ from numba import njit
 
 from mapmatch.hmm.loops import collapse_loops
 from mapmatch.hmm.routes import ROUTE_SAME_EDGE, ROUTE_STANDSTILL, ROUTE_UTURN
-from mapmatch.result import MatchedEdge, MatchedPoints, Segment
+from mapmatch.result import MatchedPoints, Segment
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -383,25 +383,8 @@ def _trim_ends(
 
 
 def _segment(net: RoadNetwork, index: int, first: int, last: int, path: _PiecePath) -> Segment:
-    arrays = net.arrays
-    u, v, key = net.edge_osm_ids(path.edge)
-    way = arrays.edge_way_id[path.edge]
-    length = arrays.edge_length_m[path.edge]
-    edges = [
-        MatchedEdge(
-            edge=int(e),
-            u=int(u[i]),
-            v=int(v[i]),
-            key=int(key[i]),
-            osm_way_ids=(int(way[i]),),
-            length_m=float(length[i]),
-            start_offset_m=float(path.start_m[i]),
-            end_offset_m=float(path.end_m[i]),
-        )
-        for i, e in enumerate(path.edge.tolist())
-    ]
-    lon, lat = net.unproject(*net.path_polyline(path.edge, path.start_m, path.end_m))
-    return Segment(index=index, first=first, last=last, edges=edges, lon=lon, lat=lat)
+    # attributes and geometry are read from the network when a result is serialised
+    return Segment(index, first, last, path.edge, path.start_m, path.end_m, net=net)
 
 
 def _locate(path: _PiecePath, along_m: FloatArray) -> tuple[IntArray, FloatArray]:

@@ -228,7 +228,8 @@ def candidate_table(result: MatchResult, net: RoadNetwork, fix: int) -> pd.DataF
     (``result.diagnostics.candidates`` for this fix): distance, log emission, log transition
     from the previous model fix's chosen candidate, posterior and whether it was chosen.
     Without diagnostics, or for a fix that did not enter the model, the rows are the directed
-    edges within the default search radius of the raw fix and the scores are NaN.
+    edges within the search radius of the raw fix (``result.config``'s, the one the match
+    was made with) and the scores are NaN.
 
     Parameters
     ----------
@@ -263,7 +264,7 @@ def candidate_table(result: MatchResult, net: RoadNetwork, fix: int) -> pd.DataF
             out = rows.loc[:, list(CANDIDATE_COLUMNS)].sort_values("distance_m", kind="stable")
             return out.reset_index(drop=True)
     p = result.points
-    config = MatchConfig()
+    config = result.config or MatchConfig()
     x, y = net.project(p.raw_lon[fix : fix + 1], p.raw_lat[fix : fix + 1])
     hits = net.nearby_edges(x, y, config.search_radius_m, max_per_point=config.max_candidates)
     edge = np.asarray(hits.edge, dtype=np.int64)
