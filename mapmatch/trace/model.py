@@ -73,6 +73,7 @@ import pandas as pd
 
 from mapmatch.errors import InputTypeError, InvalidTraceError, TraceFileError
 from mapmatch.trace import chinacrs
+from mapmatch.trace.columns import FIELD_ALIASES, Column, canonical, column, input_columns
 from mapmatch.trace.readers import RawTrace, id_columns, read_raw_traces
 
 if TYPE_CHECKING:
@@ -120,22 +121,8 @@ MOVING_STEP_M: Final = 1.0
 IMPLAUSIBLE_SHARE: Final = 0.5
 """Share of the moving steps that must be impossible for a trace's times to be set aside."""
 
-FIELD_ALIASES: Final[Mapping[str, tuple[str, ...]]] = {
-    "time": ("time", "t", "timestamp", "datetime", "ts"),
-    "lat": ("lat", "latitude"),
-    "lon": ("lon", "lng", "longitude"),
-    "heading": ("heading", "bearing", "course", "heading_deg"),
-    "speed": ("speed", "speed_mps"),
-    "accuracy": ("accuracy", "accuracy_m"),
-    "hdop": ("hdop",),
-    "odometer": ("odometer", "odometer_m"),
-    "segment": ("segment",),
-}
-"""Canonical field -> accepted column names (matched case-insensitively)."""
-
-_ALIAS_TO_FIELD = {alias: field for field, aliases in FIELD_ALIASES.items() for alias in aliases}
-_REQUIRED = ("lat", "lon")
-_OPTIONAL = ("heading", "speed", "accuracy", "hdop", "odometer")
+_REQUIRED = tuple(c.name for c in input_columns(required_only=True))
+_OPTIONAL = tuple(c for c in input_columns() if c.kind == "number" and not c.required)
 _SHOW = 5  # offending rows quoted in a message
 # Upper bounds of the magnitudes of epoch seconds, ms, us and ns (see the module docstring).
 _UNIT_BOUNDS: Final = (1e11, 1e14, 1e17, 1e20)
@@ -525,31 +512,17 @@ class Trace:
         lat = chk.numeric(given["lat"], "lat")
         lon = chk.numeric(given["lon"], "lon")
         chk.coordinates(lon, lat)
-        opt = {f: chk.numeric(given[f], f) for f in _OPTIONAL if f in given}
-
+        opt = {c.name: _checked(chk, c, given[c.name]) for c in _OPTIONAL if c.name in given}
         heading = opt.get("heading")
-        if heading is not None:
-            finite = np.isfinite(heading)
-            heading = np.where(finite, np.mod(np.where(finite, heading, 0.0), 360.0), np.nan)
-            heading[heading >= 360.0] = 0.0  # np.mod(-1e-15, 360) rounds to 360.0
         speed = opt.get("speed")
-        if speed is not None:
-            chk.rule(speed, "speed", (speed < 0) | np.isinf(speed), "must be >= 0 m/s")
         accuracy = opt.get("accuracy")
-        if accuracy is not None:
-            chk.rule(accuracy, "accuracy", ~(accuracy > 0) & ~np.isnan(accuracy), "must be > 0 m")
-            chk.rule(accuracy, "accuracy", np.isinf(accuracy), "must be finite")
         hdop = opt.get("hdop")
         if hdop is not None:
-            chk.rule(hdop, "hdop", ~(hdop > 0) & ~np.isnan(hdop), "must be > 0")
-            chk.rule(hdop, "hdop", np.isinf(hdop), "must be finite")
             from_hdop = hdop * UERE_M
             accuracy = (
                 from_hdop if accuracy is None else np.where(np.isnan(accuracy), from_hdop, accuracy)
             )
         odometer = opt.get("odometer")
-        if odometer is not None:
-            chk.rule(odometer, "odometer", np.isinf(odometer), "must be finite (NaN = unknown)")
         segment = None
         if "segment" in given:
             segment = chk.numeric(given["segment"], "segment")
@@ -913,7 +886,7 @@ def _resolve_columns(columns: pd.Index, *, trace_id: str, origin: _Origin) -> di
     """Canonical field -> the column naming it; two columns for one field is an error."""
     found: dict[str, list[str]] = {}
     for col in columns:
-        field = _ALIAS_TO_FIELD.get(str(col).strip().lower())
+        field = canonical(col)
         if field is not None:
             found.setdefault(field, []).append(col)
     for field, cols in found.items():
@@ -1171,25 +1144,61 @@ class _Checker:
                     values,
                     f"every row needs a {field} in degrees; fix or drop those rows",
                 )
-        if np.all(np.abs(lat) > 90.0) and np.all(np.abs(lon) <= 90.0):
-            bad = np.flatnonzero(np.abs(lat) > 90.0)
+        lat_col = column("lat")
+        outside = ~_within(lat, lat_col)
+        if np.all(outside) and np.all(_within(lon, lat_col)):
+            bad = np.flatnonzero(outside)
             raise self.fail(
                 field="lat",
-                problem="is out of range [-90, 90]",
+                problem=f"is out of range [{lat_col.ge:g}, {lat_col.le:g}]",
                 rows=bad,
                 raw=lat,
                 fix="every lat looks like a longitude: swapped lon/lat? swap the two columns",
             )
-        for field, values, limit in (("lat", lat, 90.0), ("lon", lon, 180.0)):
-            bad = np.flatnonzero(np.abs(values) > limit)
+        for values, col in ((lat, column("lat")), (lon, column("lon"))):
+            bad = np.flatnonzero(~_within(values, col))
             if bad.size:
                 raise self.fail(
-                    field,
-                    f"is out of range [-{limit:g}, {limit:g}]",
+                    col.name,
+                    f"is out of range [{col.ge:g}, {col.le:g}]",
                     bad,
                     values,
                     "give WGS84 degrees (not metres or projected coordinates); swapped lon/lat?",
                 )
+
+
+def _checked(chk: _Checker, col: Column, values: object) -> FloatArray:
+    """
+    An optional number column as float64, its declared rules applied (:mod:`.columns`).
+
+    A wrapping column (heading) is taken modulo its period, a non-finite value being
+    unknown (NaN); any other value must keep its bounds and be finite (NaN = unknown).
+    """
+    out = chk.numeric(values, col.name)
+    if col.wraps is not None:
+        finite = np.isfinite(out)
+        out = np.where(finite, np.mod(np.where(finite, out, 0.0), col.wraps), np.nan)
+        out[out >= col.wraps] = 0.0  # np.mod(-1e-15, 360) rounds to 360.0
+        return out
+    if col.bounded:
+        unit = f" {col.unit}" if col.unit else ""
+        broken = ~_within(out, col) & ~np.isnan(out)
+        chk.rule(out, col.name, broken, f"must be {col.rule()}{unit}")
+    chk.rule(out, col.name, np.isinf(out), "must be finite (NaN = unknown)")
+    return out
+
+
+def _within(values: FloatArray, col: Column) -> BoolArray:
+    """Whether each value keeps the column's bounds (NaN keeps none)."""
+    ok = np.ones(values.shape, dtype=bool)
+    with np.errstate(invalid="ignore"):
+        if col.gt is not None:
+            ok &= values > col.gt
+        if col.ge is not None:
+            ok &= values >= col.ge
+        if col.le is not None:
+            ok &= values <= col.le
+    return ok
 
 
 def _fmt(value: object) -> str:

@@ -75,6 +75,7 @@ import numpy as np
 import pandas as pd
 
 from mapmatch.errors import InvalidTraceError, TraceFileError
+from mapmatch.trace.columns import ID_COLUMNS, canonical, column, id_kind, normal_id_name
 
 if TYPE_CHECKING:
     import numpy.typing as npt
@@ -95,20 +96,6 @@ __all__ = [
 FORMATS = ("csv", "gpx", "kml", "nmea", "geojson", "parquet", "json")
 """Trace formats :func:`read_raw_traces` understands."""
 
-ID_COLUMNS: Final = ("trace_id", "trip_id", "track_id", "vehicle_id", "device_id", "id")
-"""Id columns a table is grouped by, from the most to the least specific."""
-
-_ID_NAMES: Final = {
-    "traceid": "trace_id",
-    "tripid": "trip_id",
-    "trackid": "track_id",
-    "vehicleid": "vehicle_id",
-    "vehicle": "vehicle_id",
-    "deviceid": "device_id",
-    "device": "device_id",
-    "imei": "device_id",
-    "id": "id",
-}
 _SUFFIXES = {
     ".csv": "csv",
     ".csv.gz": "csv",
@@ -122,14 +109,8 @@ _SUFFIXES = {
     ".parquet": "parquet",
     ".pq": "parquet",
 }
-_COORD_NAMES = frozenset({"lat", "latitude", "lon", "lng", "longitude"})
-_GPX_FIELDS = {
-    "course": "course",
-    "heading": "course",
-    "bearing": "course",
-    "speed": "speed",
-    "hdop": "hdop",
-}
+_COORD_NAMES = frozenset(column("lat").names + column("lon").names)
+_GPX_FIELDS = frozenset({"heading", "speed", "hdop"})  # read from a trkpt's child elements
 _DOCTYPE = re.compile(rb"<!\s*(DOCTYPE|ENTITY)", re.IGNORECASE)
 _SHOW = 5
 _TABLE_ROW = "table row"
@@ -325,17 +306,12 @@ class _Context:
 # --------------------------------------------------------------------------- tables
 
 
-def _normal(name: object) -> str:
-    """A column name for comparing: lower case, without ``_``, ``-``, spaces and dots."""
-    return re.sub(r"[\s_\-.]+", "", str(name).strip().lower())
-
-
 def _id_columns(columns: list[str], ctx: _Context) -> list[str]:
     """The id columns to group by, most specific first (the rule of the module docstring)."""
     if ctx.id_column is not None:
-        want = _normal(ctx.id_column)
+        want = normal_id_name(ctx.id_column)
         exact = [c for c in columns if str(c).strip().lower() == ctx.id_column.strip().lower()]
-        found = exact or [c for c in columns if _normal(c) == want]
+        found = exact or [c for c in columns if normal_id_name(c) == want]
         if not found:
             shown = ", ".join(repr(str(c)) for c in columns) or "none"
             msg = (
@@ -349,7 +325,7 @@ def _id_columns(columns: list[str], ctx: _Context) -> list[str]:
         return found
     by_kind: dict[str, list[str]] = {}
     for col in columns:
-        kind = _ID_NAMES.get(_normal(col))
+        kind = id_kind(col)
         if kind is not None:
             by_kind.setdefault(kind, []).append(col)
     for kind, cols in by_kind.items():
@@ -418,7 +394,7 @@ def group_rows(
     row_numbers = (
         ctx.id_column is None
         and cols
-        and _normal(cols[0]) == "id"
+        and normal_id_name(cols[0]) == "id"
         and len(frame) > 2
         and frame[cols[0]].nunique(dropna=False) == len(frame)
     )
@@ -751,8 +727,8 @@ def _gpx_point(pt: ET.Element) -> dict[str, object]:
         tag = _local(el.tag)
         if tag == "time":
             rec["time"] = el.text.strip()
-        elif tag in _GPX_FIELDS:
-            rec[_GPX_FIELDS[tag]] = el.text.strip()
+        elif canonical(tag) in _GPX_FIELDS:
+            rec[str(canonical(tag))] = el.text.strip()
     return rec
 
 
@@ -1094,7 +1070,7 @@ def _read_json(data: bytes, ctx: _Context) -> list[RawTrace]:
     frame = pd.DataFrame.from_records(points)
     numbers = np.arange(1, len(points) + 1, dtype=np.int64)
     if tid is not None:
-        drop = [c for c in frame.columns if _ID_NAMES.get(_normal(c)) == "trace_id"]
+        drop = [c for c in frame.columns if id_kind(c) == "trace_id"]
         frame = frame.drop(columns=drop)
         ctx = ctx.renamed(str(tid))
     return group_rows(frame, numbers=numbers, label="point", ctx=ctx)
