@@ -200,9 +200,19 @@ def _bench_set(
 
 
 #: Members the export module added to the legacy document (removed before comparing).
-NEW_EDGE_FIELDS: frozenset[str] = frozenset()
-NEW_POINT_FIELDS: frozenset[str] = frozenset()
-NEW_SEGMENT_FIELDS: frozenset[str] = frozenset()
+NEW_EDGE_FIELDS = frozenset(
+    {
+        "name",
+        "road_class",
+        "speed_limit_kph",
+        "entry_time",
+        "exit_time",
+        "duration_s",
+        "mean_speed_kph",
+    }
+)
+NEW_POINT_FIELDS = frozenset({"segment", "edge_index", "along_m"})
+NEW_SEGMENT_FIELDS = frozenset({"start_time", "end_time"})
 
 
 def _without_new_fields(doc: dict[str, Any]) -> dict[str, Any]:

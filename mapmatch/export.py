@@ -22,6 +22,8 @@ coordinates 7 (about 1 cm, numpy's rounding), metres 3 and confidences 4 (Python
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
+from itertools import pairwise
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -33,23 +35,29 @@ from mapmatch._jsontext import (
     Ints,
     Items,
     Nested,
+    Strings,
     Table,
     Tuple,
     Values,
     py_round,
 )
+from mapmatch._timing import PathPositions, edge_times, path_positions
 
 if TYPE_CHECKING:
     import pandas as pd
 
     from mapmatch.result import MatchResult, Segment
-    from mapmatch.types import FloatArray
+    from mapmatch.types import FloatArray, IntArray
 
 __all__ = [
     "COORD_DIGITS",
+    "EdgeTable",
+    "PathPositions",
+    "edge_table",
     "edges_frame",
     "geojson_bytes",
     "geojson_dict",
+    "path_positions",
     "points_frame",
 ]
 
@@ -57,16 +65,136 @@ __all__ = [
 COORD_DIGITS = 7
 _METRES = 3
 _CONFIDENCE = 4
+_SECONDS = 3
+
+
+# --------------------------------------------------------------------------- columns
+
+
+@dataclass(frozen=True, slots=True)
+class EdgeTable:
+    """
+    Every driven edge of a result, one entry each, segments in order.
+
+    The columns every per-edge output shows (GeoJSON ``edges``, :func:`edges_frame`, the
+    batch's edge files), and what the service's peers' formats need (Valhalla's edge
+    ``names``, ``speed_limit``, ``road_class``, ``begin_time``/``end_time``).
+
+    Attributes
+    ----------
+    segment, order
+        The edge's segment and its position in the segment's edge list.
+    first_point, last_point
+        The segment's first and last fix.
+    edge
+        Index of the edge in the network's arrays.
+    u, v, key, way_id
+        OSM node ids of its ends, parallel-edge key, OSM way.
+    name, road_class, speed_limit_kph
+        Street name (``""`` for none), ``highway`` class, ``maxspeed`` (or the class default).
+    length_m, start_offset_m, end_offset_m
+        The edge's length and the driven stretch on it (metres from the edge's start).
+    path_start_m, path_end_m
+        Where the stretch starts and ends along the segment's path, metres.
+    entry_time_s, exit_time_s
+        When the edge was entered and left, epoch seconds, interpolated between the fixes
+        around its ends (:mod:`mapmatch._timing`); NaN for a trace without times.
+    """
+
+    segment: IntArray
+    order: IntArray
+    first_point: IntArray
+    last_point: IntArray
+    edge: IntArray
+    u: IntArray
+    v: IntArray
+    key: IntArray
+    way_id: IntArray
+    name: tuple[str, ...]
+    road_class: tuple[str, ...]
+    speed_limit_kph: FloatArray
+    length_m: FloatArray
+    start_offset_m: FloatArray
+    end_offset_m: FloatArray
+    path_start_m: FloatArray
+    path_end_m: FloatArray
+    entry_time_s: FloatArray
+    exit_time_s: FloatArray
+
+    def __len__(self) -> int:
+        return len(self.edge)
+
+    @property
+    def driven_m(self) -> FloatArray:
+        """Metres driven on each edge."""
+        return self.end_offset_m - self.start_offset_m
+
+    @property
+    def duration_s(self) -> FloatArray:
+        """Seconds on each edge (NaN without times)."""
+        return self.exit_time_s - self.entry_time_s
+
+    @property
+    def mean_speed_kph(self) -> FloatArray:
+        """Driven metres over seconds on each edge, km/h; NaN where no time passed."""
+        duration = self.duration_s
+        with np.errstate(invalid="ignore", divide="ignore"):
+            speed = 3.6 * self.driven_m / duration
+        return np.asarray(np.where(duration > 0, speed, np.nan), dtype=np.float64)
+
+
+def edge_table(result: MatchResult, positions: PathPositions | None = None) -> EdgeTable:
+    """
+    The columns of every driven edge of ``result`` (see :class:`EdgeTable`).
+
+    Parameters
+    ----------
+    result
+        A match.
+    positions
+        Its fixes' places on the path, when already known (:func:`path_positions`).
+    """
+    positions = positions if positions is not None else path_positions(result)
+    times = edge_times(result, positions)
+    segs = result.segments
+    sizes = [len(s.edge) for s in segs]
+    attrs = [s.attributes for s in segs]
+
+    def cat(values: list[Any], dtype: type) -> Any:
+        return np.concatenate(values).astype(dtype) if values else np.zeros(0, dtype=dtype)
+
+    return EdgeTable(
+        segment=cat([np.full(m, s.index) for s, m in zip(segs, sizes, strict=True)], np.int64),
+        order=cat([np.arange(m) for m in sizes], np.int64),
+        first_point=cat([np.full(m, s.first) for s, m in zip(segs, sizes, strict=True)], np.int64),
+        last_point=cat([np.full(m, s.last) for s, m in zip(segs, sizes, strict=True)], np.int64),
+        edge=cat([s.edge for s in segs], np.int64),
+        u=cat([a.u for a in attrs], np.int64),
+        v=cat([a.v for a in attrs], np.int64),
+        key=cat([a.key for a in attrs], np.int64),
+        way_id=cat([a.way_id for a in attrs], np.int64),
+        name=tuple(n for a in attrs for n in a.name),
+        road_class=tuple(c for a in attrs for c in a.road_class),
+        speed_limit_kph=cat([a.speed_limit_kph for a in attrs], np.float64),
+        length_m=cat([a.length_m for a in attrs], np.float64),
+        start_offset_m=cat([s.start_offset_m for s in segs], np.float64),
+        end_offset_m=cat([s.end_offset_m for s in segs], np.float64),
+        path_start_m=cat([t.start_m for t in times], np.float64),
+        path_end_m=cat([t.end_m for t in times], np.float64),
+        entry_time_s=cat([t.entry_s for t in times], np.float64),
+        exit_time_s=cat([t.exit_s for t in times], np.float64),
+    )
 
 
 # --------------------------------------------------------------------------- GeoJSON
 
 
-def _point_table(result: MatchResult) -> Table:
+def _point_table(result: MatchResult, positions: PathPositions) -> Table:
     """The ``point`` Features, one row per fix."""
     p = result.points
     n = len(p.time_s)
     matched = np.asarray(p.matched, dtype=bool)
+    on_path = positions.edge_index >= 0
     properties = Table(
         n,
         [
@@ -82,6 +210,9 @@ def _point_table(result: MatchResult) -> Table:
             ("confidence", Floats(py_round(p.confidence, _CONFIDENCE))),
             ("interpolated", Bools(p.interpolated)),
             ("outlier", Bools(p.outlier)),
+            ("segment", Ints(p.segment, matched)),
+            ("edge_index", Ints(positions.edge_index, on_path)),
+            ("along_m", Floats(py_round(positions.along_m, _METRES))),
         ],
     )
     position = Tuple((_coordinates(p.lon), _coordinates(p.lat)), matched, "Point")
@@ -96,19 +227,30 @@ def _coordinates(degrees: FloatArray) -> Floats:
     return Floats(rounded)
 
 
-def _edge_table(seg: Segment) -> Table:
-    """The ``edges`` of a segment Feature, one row per driven edge."""
-    a = seg.attributes
+def _edge_json(edges: EdgeTable, part: slice) -> Table:
+    """The ``edges`` of a segment Feature: rows ``part`` of the result's edge table."""
+    names = [name or None for name in edges.name[part]]
+
+    def metres(values: FloatArray) -> Floats:
+        return Floats(py_round(values[part], _METRES))
+
     return Table(
-        len(seg.edge),
+        part.stop - part.start,
         [
-            ("u", Ints(a.u)),
-            ("v", Ints(a.v)),
-            ("key", Ints(a.key)),
-            ("osm_way_ids", Tuple((Ints(a.way_id),))),
-            ("length_m", Floats(py_round(a.length_m, _METRES))),
-            ("start_offset_m", Floats(py_round(seg.start_offset_m, _METRES))),
-            ("end_offset_m", Floats(py_round(seg.end_offset_m, _METRES))),
+            ("u", Ints(edges.u[part])),
+            ("v", Ints(edges.v[part])),
+            ("key", Ints(edges.key[part])),
+            ("osm_way_ids", Tuple((Ints(edges.way_id[part]),))),
+            ("length_m", metres(edges.length_m)),
+            ("start_offset_m", metres(edges.start_offset_m)),
+            ("end_offset_m", metres(edges.end_offset_m)),
+            ("name", Strings(names)),
+            ("road_class", Strings(edges.road_class[part])),
+            ("speed_limit_kph", Floats(py_round(edges.speed_limit_kph[part], 1))),
+            ("entry_time", Floats(py_round(edges.entry_time_s[part], _SECONDS))),
+            ("exit_time", Floats(py_round(edges.exit_time_s[part], _SECONDS))),
+            ("duration_s", Floats(py_round(edges.duration_s[part], _SECONDS))),
+            ("mean_speed_kph", Floats(py_round(edges.mean_speed_kph[part], 2))),
         ],
     )
 
@@ -120,11 +262,14 @@ def _path(seg: Segment) -> Values:
     return Values(Tuple((_coordinates(lon), _coordinates(lat))), len(lon))
 
 
-def _segment_table(result: MatchResult) -> Table:
+def _segment_table(result: MatchResult, edges: EdgeTable) -> Table:
     """The ``segment`` Features, one row per segment."""
     segs = result.segments
     count = len(segs)
     lengths = np.array([s.length_m for s in segs], dtype=np.float64)
+    bounds = np.concatenate(([0], np.cumsum([len(s.edge) for s in segs], dtype=np.int64)))
+    parts = [slice(a, b) for a, b in pairwise(bounds.tolist())]
+    start, end = _segment_times(edges, bounds)
     properties = Table(
         count,
         [
@@ -140,7 +285,9 @@ def _segment_table(result: MatchResult) -> Table:
                 ),
             ),
             ("length_m", Floats(py_round(lengths, _METRES))),
-            ("edges", Items([_edge_table(s) for s in segs])),
+            ("edges", Items([_edge_json(edges, part) for part in parts])),
+            ("start_time", Floats(py_round(start, _SECONDS))),
+            ("end_time", Floats(py_round(end, _SECONDS))),
         ],
     )
     return Table(
@@ -151,6 +298,16 @@ def _segment_table(result: MatchResult) -> Table:
             ("properties", Nested(properties)),
         ],
     )
+
+
+def _segment_times(edges: EdgeTable, bounds: IntArray) -> tuple[FloatArray, FloatArray]:
+    """Each segment's first entry and last exit time (NaN without times or edges)."""
+    start = np.full(len(bounds) - 1, np.nan)
+    end = np.full(len(bounds) - 1, np.nan)
+    has = bounds[1:] > bounds[:-1]
+    start[has] = edges.entry_time_s[bounds[:-1][has]]
+    end[has] = edges.exit_time_s[bounds[1:][has] - 1]
+    return start, end
 
 
 def _head(result: MatchResult) -> dict[str, Any]:
@@ -186,31 +343,48 @@ def geojson_bytes(result: MatchResult) -> bytes:
         points).
     """
     head = json.dumps(_head(result), allow_nan=False, separators=(",", ":"))
-    parts = [t.text() for t in (_segment_table(result), _point_table(result)) if t.rows]
+    parts = [t.text() for t in _feature_tables(result) if t.rows]
     return f'{head[:-1]},"features":[{",".join(parts)}]}}'.encode("ascii")
 
 
 def geojson_dict(result: MatchResult) -> dict[str, Any]:
     """The GeoJSON document of :func:`geojson_bytes` as Python objects."""
     doc = _head(result)
-    doc["features"] = _segment_table(result).objects() + _point_table(result).objects()
+    segments, points = _feature_tables(result)
+    doc["features"] = segments.objects() + points.objects()
     return doc
+
+
+def _feature_tables(result: MatchResult) -> tuple[Table, Table]:
+    positions = path_positions(result)
+    edges = edge_table(result, positions)
+    return _segment_table(result, edges), _point_table(result, positions)
 
 
 # --------------------------------------------------------------------------- tables
 
 
+def _utc(epoch_s: FloatArray) -> pd.DatetimeIndex:
+    """Epoch seconds as UTC datetimes to the microsecond (NaT for NaN)."""
+    import pandas as pd
+
+    return pd.to_datetime(epoch_s, unit="s", utc=True).as_unit("us")
+
+
 def points_frame(result: MatchResult) -> pd.DataFrame:
     """
-    One row per fix: time, raw and snapped position, edge, offset, confidence.
+    One row per fix: time, raw and snapped position, edge, place on the path, confidence.
 
     Columns ``trace_id``, ``index``, ``time``, ``raw_lon``, ``raw_lat``, ``matched``,
     ``segment``, ``lon``, ``lat``, ``u``, ``v``, ``key``, ``offset_m``, ``distance_m``,
-    ``confidence``, ``interpolated``, ``outlier``.
+    ``confidence``, ``interpolated``, ``outlier``, ``edge_index`` (the fix's edge in its
+    segment's list, the ``order`` of :func:`edges_frame`) and ``along_m`` (metres along the
+    segment's path).
     """
     import pandas as pd
 
     p = result.points
+    positions = path_positions(result)
     return pd.DataFrame(
         {
             "trace_id": result.trace_id,
@@ -230,54 +404,45 @@ def points_frame(result: MatchResult) -> pd.DataFrame:
             "confidence": p.confidence,
             "interpolated": p.interpolated,
             "outlier": p.outlier,
+            "edge_index": positions.edge_index,
+            "along_m": positions.along_m,
         }
     )
 
 
-_EDGE_COLUMNS = (
-    "trace_id",
-    "segment",
-    "order",
-    "first_point",
-    "last_point",
-    "u",
-    "v",
-    "key",
-    "osm_way_ids",
-    "length_m",
-    "start_offset_m",
-    "end_offset_m",
-)
-
-
 def edges_frame(result: MatchResult) -> pd.DataFrame:
     """
-    One row per driven edge: trace, segment, order, OSM ids, length and offsets.
+    One row per driven edge, segments in order (the columns of :class:`EdgeTable`).
 
-    ``osm_way_ids`` holds the way ids joined by ``;``.
+    Columns ``trace_id``, ``segment``, ``order``, ``first_point``, ``last_point``, ``u``,
+    ``v``, ``key``, ``osm_way_ids`` (way ids joined by ``;``), ``name`` (null for an
+    unnamed road), ``road_class``, ``speed_limit_kph``, ``length_m``, ``start_offset_m``,
+    ``end_offset_m``, ``entry_time`` / ``exit_time`` (UTC; null without times),
+    ``duration_s`` and ``mean_speed_kph``.
     """
     import pandas as pd
 
-    parts: list[dict[str, Any]] = []
-    for seg in result.segments:
-        a = seg.attributes
-        m = len(seg.edge)
-        parts.append(
-            {
-                "segment": np.full(m, seg.index, dtype=np.int64),
-                "order": np.arange(m, dtype=np.int64),
-                "first_point": np.full(m, seg.first, dtype=np.int64),
-                "last_point": np.full(m, seg.last, dtype=np.int64),
-                "u": a.u,
-                "v": a.v,
-                "key": a.key,
-                "osm_way_ids": np.asarray(a.way_id.astype(str), dtype=object),
-                "length_m": a.length_m,
-                "start_offset_m": seg.start_offset_m,
-                "end_offset_m": seg.end_offset_m,
-            }
-        )
-    if not parts:
-        return pd.DataFrame({name: [] for name in _EDGE_COLUMNS})
-    columns = {k: np.concatenate([part[k] for part in parts]) for k in parts[0]}
-    return pd.DataFrame({"trace_id": result.trace_id, **columns}).loc[:, list(_EDGE_COLUMNS)]
+    t = edge_table(result)
+    return pd.DataFrame(
+        {
+            "trace_id": np.full(len(t), result.trace_id, dtype=object),
+            "segment": t.segment,
+            "order": t.order,
+            "first_point": t.first_point,
+            "last_point": t.last_point,
+            "u": t.u,
+            "v": t.v,
+            "key": t.key,
+            "osm_way_ids": t.way_id.astype(str).astype(object),
+            "name": np.array([n or None for n in t.name], dtype=object),
+            "road_class": np.array(t.road_class, dtype=object),
+            "speed_limit_kph": t.speed_limit_kph,
+            "length_m": t.length_m,
+            "start_offset_m": t.start_offset_m,
+            "end_offset_m": t.end_offset_m,
+            "entry_time": _utc(t.entry_time_s),
+            "exit_time": _utc(t.exit_time_s),
+            "duration_s": t.duration_s,
+            "mean_speed_kph": t.mean_speed_kph,
+        }
+    )

@@ -218,9 +218,22 @@ def test_geojson_outputs_follow_the_design_schema(geojson_run: tuple[Path, int, 
     segment = next(f for f in doc["features"] if f["properties"]["kind"] == "segment")
     assert segment["geometry"]["type"] == "LineString"
     assert {"segment", "point_range", "length_m", "edges"} <= set(segment["properties"])
-    assert {"u", "v", "key", "osm_way_ids", "length_m", "start_offset_m", "end_offset_m"} == set(
-        segment["properties"]["edges"][0]
-    )
+    assert {
+        "u",
+        "v",
+        "key",
+        "osm_way_ids",
+        "length_m",
+        "start_offset_m",
+        "end_offset_m",
+        "name",
+        "road_class",
+        "speed_limit_kph",
+        "entry_time",
+        "exit_time",
+        "duration_s",
+        "mean_speed_kph",
+    } == set(segment["properties"]["edges"][0])
     point = next(f for f in doc["features"] if f["properties"]["kind"] == "point")
     assert {
         "index",
@@ -232,6 +245,9 @@ def test_geojson_outputs_follow_the_design_schema(geojson_run: tuple[Path, int, 
         "offset_m",
         "distance_m",
         "confidence",
+        "segment",
+        "edge_index",
+        "along_m",
     } <= (set(point["properties"]))
 
 

@@ -168,3 +168,148 @@ def test_non_finite_numbers_are_null(results: list[mapmatch.MatchResult]) -> Non
     assert unmatched
     assert {f["properties"]["offset_m"] for f in unmatched} == {None}
     assert {f["properties"]["u"] for f in unmatched} == {None}
+
+
+# --------------------------------------------------------------------------- issue 16: timing
+
+
+@pytest.fixture(scope="module")
+def steady(default_net: roadnets.RoadNetwork) -> list[tuple[Any, mapmatch.MatchResult]]:
+    """1 Hz trips without stops (the truth's time at each place is unambiguous), matched."""
+    cfg = SimulationConfig(interval_s=1.0, noise_m=4.0, stop_probability=0.0)
+    trips = simulate_trips(default_net, cfg, count=4, seed=21)
+    return [(trip, mapmatch.match(trip.trace, default_net)) for trip in trips]
+
+
+def test_edges_are_entered_when_the_truth_says(
+    steady: list[tuple[Any, mapmatch.MatchResult]],
+) -> None:
+    errors = []
+    for trip, result in steady:
+        table = export.edge_table(result)
+        driven = np.array([e.end_offset_m - e.start_offset_m for e in trip.edges])
+        true_start = np.concatenate(([0.0], np.cumsum(driven)[:-1]))
+        true_entry = np.interp(true_start, trip.dense_distance_m, trip.dense_time_s)
+        place: dict[int, int] = {}
+        for k, e in enumerate(trip.edges):
+            place.setdefault(e.edge, k)
+        for i in range(1, len(table)):
+            k = place.get(int(table.edge[i]), 0)
+            if k > 0 and abs(table.path_start_m[i] - true_start[k]) < 5.0:
+                errors.append(table.entry_time_s[i] - true_entry[k])
+    errors_s = np.abs(np.array(errors))
+    assert len(errors_s) > 20
+    assert np.median(errors_s) < 1.0  # 4 m of noise at about 10 m/s
+    assert np.percentile(errors_s, 90) < 2.5
+
+
+def test_edge_times_tile_each_segment(results: list[mapmatch.MatchResult]) -> None:
+    timed = [r for r in results if np.isfinite(r.points.time_s).all()]
+    assert len(timed) >= 5
+    for result in timed:
+        table = export.edge_table(result)
+        p = result.points
+        for seg in result.segments:
+            rows = table.segment == seg.index
+            entry, exit_ = table.entry_time_s[rows], table.exit_time_s[rows]
+            fixes = np.flatnonzero((p.segment == seg.index) & p.matched)
+            assert entry[0] == p.time_s[fixes[0]]
+            assert exit_[-1] == p.time_s[fixes[-1]]
+            assert (np.diff(entry) >= 0).all()
+            assert (exit_ >= entry).all()
+            np.testing.assert_array_equal(exit_[:-1], entry[1:])  # one edge left, next entered
+        speed = table.mean_speed_kph
+        moving = table.duration_s > 0
+        np.testing.assert_allclose(
+            speed[moving], 3.6 * table.driven_m[moving] / table.duration_s[moving]
+        )
+        assert np.isnan(speed[~moving]).all()
+
+
+def test_without_times_every_time_is_null(results: list[mapmatch.MatchResult]) -> None:
+    result = next(r for r in results if np.isnan(r.points.time_s).all())
+    doc = result.to_geojson()
+    edges = [
+        e
+        for f in doc["features"]
+        if f["properties"]["kind"] == "segment"
+        for e in f["properties"]["edges"]
+    ]
+    assert edges
+    for name in ("entry_time", "exit_time", "duration_s", "mean_speed_kph"):
+        assert {e[name] for e in edges} == {None}
+    frame = export.edges_frame(result)
+    assert frame["entry_time"].isna().all()
+    assert str(frame["entry_time"].dtype) == "datetime64[us, UTC]"
+
+
+def test_edges_carry_street_name_class_and_limit(
+    results: list[mapmatch.MatchResult], default_net: roadnets.RoadNetwork
+) -> None:
+    from roadnets.drivable import ROAD_CLASSES
+
+    a = default_net.arrays
+    for result in results[:4]:
+        table = export.edge_table(result)
+        assert list(table.name) == default_net.way_names.names_of(table.way_id)
+        assert set(table.road_class) <= set(ROAD_CLASSES)
+        assert list(table.road_class) == [ROAD_CLASSES[c] for c in a.edge_class[table.edge]]
+        np.testing.assert_allclose(table.speed_limit_kph, a.edge_speed_mps[table.edge] * 3.6)
+        doc = result.to_geojson()
+        edges = [
+            e
+            for f in doc["features"]
+            if f["properties"]["kind"] == "segment"
+            for e in f["properties"]["edges"]
+        ]
+        assert [e["name"] for e in edges] == [n or None for n in table.name]
+        assert any(e["name"] for e in edges)  # Monaco's streets have names
+        frame = export.edges_frame(result)
+        assert frame["name"].fillna("").tolist() == list(table.name)
+        assert frame["name"].isna().tolist() == [not n for n in table.name]
+
+
+def test_fixes_know_their_place_on_the_path(results: list[mapmatch.MatchResult]) -> None:
+    for result in results:
+        p = result.points
+        pos = export.path_positions(result)
+        table = export.edge_table(result, pos)
+        matched = p.matched
+        assert (pos.edge_index[matched] >= 0).all()
+        assert (pos.edge_index[~matched] == -1).all()
+        assert np.isnan(pos.along_m[~matched]).all()
+        for seg in result.segments:
+            fixes = np.flatnonzero((p.segment == seg.index) & matched)
+            k = pos.edge_index[fixes]
+            assert (seg.edge[k] == p.edge[fixes]).all()  # the fix's own edge
+            rows = np.flatnonzero(table.segment == seg.index)[k]
+            start = table.path_start_m[rows] + p.offset_m[fixes] - table.start_offset_m[rows]
+            np.testing.assert_allclose(pos.along_m[fixes], start, atol=1e-6)
+            assert (pos.along_m[fixes] <= seg.length_m + 1e-6).all()
+        frame = result.to_dataframe()
+        assert frame["edge_index"].tolist()[:3] == pos.edge_index.tolist()[:3]
+
+
+def test_an_edge_driven_twice_is_told_apart_by_the_order_of_the_fixes(
+    default_net: roadnets.RoadNetwork,
+) -> None:
+    from mapmatch._timing import _stretch_of
+
+    a = default_net.arrays
+    e, f = 3, int(a.out_edge[a.out_ptr[a.edge_v[3]]])
+    length = float(a.edge_length_m[e])
+    seg = mapmatch.Segment(
+        0,
+        0,
+        5,
+        np.array([e, f, e, f]),
+        np.zeros(4),
+        np.array([length, float(a.edge_length_m[f]), length, float(a.edge_length_m[f])]),
+        net=default_net,
+    )
+    fix_edge = np.array([e, e, f, e, e, f])
+    other = float(a.edge_length_m[f])
+    offset = np.array([0.1, 0.6, 0.5, 0.2, 0.7, 0.5]) * np.array(
+        [length] * 2 + [other] + [length] * 2 + [other]
+    )
+    assert _stretch_of(seg, fix_edge, offset).tolist() == [0, 0, 1, 2, 2, 3]
