@@ -18,9 +18,10 @@ from typing import Annotated
 
 from fastapi import Depends, Request
 
-from api.errors import UnauthorizedError
+from api.errors import RepeatedParameterError, UnauthorizedError
 from api.metrics import ServiceMetrics
 from api.networks import NetworkRegistry
+from api.schemas import MatchQuery
 from api.service import MatchService
 from api.settings import Settings
 
@@ -36,7 +37,15 @@ __all__ = [
     "get_service",
     "get_settings",
     "ready_networks",
+    "single_valued_query",
 ]
+
+#: Query parameters of ``POST /v1/match`` that take several values (a band is two numbers).
+_LISTS = frozenset(
+    name
+    for name, prop in MatchQuery.model_json_schema()["properties"].items()
+    if "array" in (prop.get("type"), *(sub.get("type") for sub in prop.get("anyOf", ())))
+)
 
 
 def get_settings(request: Request) -> Settings:
@@ -125,3 +134,25 @@ class BearerToken:
         problem = self.problem(header)
         if problem is not None:
             raise UnauthorizedError(problem)
+
+
+def single_valued_query(request: Request) -> None:
+    """
+    Refuse a query parameter given more than once (only list-valued ones may repeat).
+
+    Raises
+    ------
+    RepeatedParameterError
+        422 ``repeated_parameter`` naming ``query.<name>``, instead of silently keeping one.
+    """
+    seen: dict[str, int] = {}
+    for key, _value in request.query_params.multi_items():
+        seen[key] = seen.get(key, 0) + 1
+    twice = sorted(k for k, count in seen.items() if count > 1 and k not in _LISTS)
+    if twice:
+        name = twice[0]
+        msg = (
+            f"query parameter {name!r} is given {seen[name]} times; it takes one value, give "
+            "it once"
+        )
+        raise RepeatedParameterError(msg, field=f"query.{name}")

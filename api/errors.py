@@ -33,19 +33,25 @@ __all__ = [
     "ERROR_TABLE",
     "HTTP_CODES",
     "INTERNAL_ERROR",
+    "BodyTimeoutError",
     "BodyTooLargeError",
     "ErrorAnswer",
     "ErrorRule",
+    "InvalidEncodingError",
     "InvalidJSONError",
     "MatchTimeoutError",
     "NotReadyError",
     "OptionError",
+    "OverBudgetError",
     "OverloadedError",
+    "RepeatedParameterError",
     "RequestFieldError",
     "ServiceError",
+    "TooManyColumnsError",
     "TooManyPointsError",
     "UnauthorizedError",
     "UnknownNetworkError",
+    "UnsupportedEncodingError",
     "UnsupportedMediaTypeError",
     "error_answer",
     "error_body",
@@ -98,6 +104,30 @@ class TooManyPointsError(ServiceError, ValueError):
     """The trace has more points than ``MAPMATCH_MAX_POINTS``."""
 
 
+class TooManyColumnsError(ServiceError, ValueError):
+    """A CSV body has more columns than ``MAPMATCH_MAX_COLUMNS``."""
+
+
+class OverBudgetError(ServiceError, ValueError):
+    """Matching the request would need more memory than ``MAPMATCH_MEMORY_BUDGET_MB``."""
+
+
+class UnsupportedEncodingError(ServiceError, ValueError):
+    """The body's Content-Encoding is neither identity nor gzip."""
+
+
+class InvalidEncodingError(ServiceError, ValueError):
+    """The body says it is gzip (or looks like a gzip file) but cannot be decompressed."""
+
+
+class BodyTimeoutError(ServiceError, TimeoutError):
+    """The body did not arrive within ``MAPMATCH_BODY_TIMEOUT_S``."""
+
+
+class RepeatedParameterError(ServiceError, ValueError):
+    """A query parameter that takes one value was given several times."""
+
+
 class UnauthorizedError(ServiceError, PermissionError):
     """The bearer token is missing or wrong."""
 
@@ -127,14 +157,26 @@ class ErrorRule:
 #: The one table; looked up along the raised class's MRO, so the most specific class wins.
 ERROR_TABLE: Final[tuple[ErrorRule, ...]] = (
     ErrorRule(InvalidJSONError, 400, "invalid_json", "the body is not well-formed JSON"),
+    ErrorRule(InvalidEncodingError, 400, "invalid_encoding", "a gzip body cannot be inflated"),
     ErrorRule(UnauthorizedError, 401, "unauthorized", "bearer token missing or wrong"),
     ErrorRule(UnknownNetworkError, 404, "unknown_network", "no served network has that id"),
     ErrorRule(BodyTooLargeError, 413, "body_too_large", "body over MAPMATCH_MAX_BODY_BYTES"),
     ErrorRule(TooManyPointsError, 413, "too_many_points", "more points than MAPMATCH_MAX_POINTS"),
     ErrorRule(
+        TooManyColumnsError, 413, "too_many_columns", "more CSV columns than MAPMATCH_MAX_COLUMNS"
+    ),
+    ErrorRule(OverBudgetError, 413, "over_budget", "would need more than the memory budget"),
+    ErrorRule(BodyTimeoutError, 408, "body_timeout", "the body arrived too slowly"),
+    ErrorRule(
+        UnsupportedEncodingError, 415, "unsupported_encoding", "Content-Encoding not readable"
+    ),
+    ErrorRule(
         UnsupportedMediaTypeError, 415, "unsupported_media_type", "Content-Type not readable"
     ),
     ErrorRule(RequestFieldError, 422, "invalid_request", "a request field is missing or wrong"),
+    ErrorRule(
+        RepeatedParameterError, 422, "repeated_parameter", "a one-value query option repeated"
+    ),
     ErrorRule(
         InvalidTraceError, 422, "invalid_trace", "a point is missing, of a wrong type or range"
     ),
@@ -187,23 +229,48 @@ def rule_for(exc: BaseException) -> ErrorRule:
     return INTERNAL_ERROR
 
 
+#: At most this many offending rows are listed in an error body; ``rows_total`` counts all.
+MAX_ERROR_ROWS: Final = 100
+#: Messages longer than this many characters are cut, saying how much was left out.
+MAX_MESSAGE_CHARS: Final = 2_000
+
+
 def error_body(
     code: str, message: str, *, field: str | None = None, rows: Iterable[int] = ()
 ) -> dict[str, dict[str, object]]:
     """
-    The JSON error document ``{"error": {"code", "message", "field"?, "rows"?}}``.
+    The JSON error document ``{"error": {"code", "message", "field"?, "rows"?, "rows_total"?}}``.
+
+    Bounded whatever the error: at most :data:`MAX_ERROR_ROWS` rows (``rows_total`` then
+    counts them all and the message says how many more) and :data:`MAX_MESSAGE_CHARS`
+    characters of message, so a body with a million bad rows answers a few KB.
 
     Examples
     --------
     >>> error_body("invalid_trace", "lat out of range", field="points[2].lat", rows=[2])
     {'error': {'code': 'invalid_trace', 'message': 'lat out of range', 'field': 'points[2].lat', 'rows': [2]}}
+    >>> error_body("invalid_trace", "bad", rows=range(250))["error"]["rows_total"]
+    250
     """  # noqa: E501
+    if len(message) > MAX_MESSAGE_CHARS:
+        cut = len(message) - MAX_MESSAGE_CHARS
+        message = f"{message[:MAX_MESSAGE_CHARS]} ... and {cut:,} more characters"
     inner: dict[str, object] = {"code": code, "message": message}
     if field:
-        inner["field"] = field
-    rows = [int(r) for r in rows]
-    if rows:
-        inner["rows"] = rows
+        inner["field"] = field[:200]
+    listed: list[int] = []
+    total = 0
+    for row in rows:
+        total += 1
+        if total <= MAX_ERROR_ROWS:
+            listed.append(int(row))
+    if listed:
+        inner["rows"] = listed
+    if total > MAX_ERROR_ROWS:
+        inner["rows_total"] = total
+        inner["message"] = (
+            f"{inner['message']} (rows lists {MAX_ERROR_ROWS}, and {total - MAX_ERROR_ROWS:,} more)"
+        )
     return {"error": inner}
 
 
@@ -239,4 +306,6 @@ def error_answer(exc: BaseException) -> ErrorAnswer:
         headers["WWW-Authenticate"] = 'Bearer realm="mapmatch"'
     if rule.status == 503:
         headers["Retry-After"] = "1"
+    if rule.status in (408, 413):
+        headers["Connection"] = "close"  # the rest of the body is not read
     return ErrorAnswer(rule.status, rule.code, json.dumps(body).encode(), headers)

@@ -4,6 +4,8 @@ Structured logs: one JSON object per line on stderr.
 ``api.access`` logs one line per request (method, path, route template, status, duration,
 points, network, error code, request id); ``api`` logs the rest (startup, tracebacks of bugs),
 with the request id when there is one, so a 500's answer can be traced to its traceback.
+Every other line of the process (uvicorn, the matcher, Python warnings) is written in the same
+JSON shape by the same handler.
 """
 
 from __future__ import annotations
@@ -54,12 +56,27 @@ class JsonFormatter(logging.Formatter):
 
 
 def configure_logging() -> None:
-    """Send the ``api`` loggers to stderr as JSON lines (once per process)."""
-    root = logging.getLogger("api")
-    if not any(h.get_name() == _HANDLER_NAME for h in root.handlers):
+    """
+    Make every log line of the process one JSON object on stderr (once per process).
+
+    The ``api`` loggers log at INFO; everything else (uvicorn's own lines, the matcher's
+    warnings, Python ``warnings``, captured through logging) goes through the root logger at
+    WARNING, with the same formatter, so no plain-text line lands in the JSON log. Handlers
+    other code put on the root logger (the CLI's plain-text one) are replaced.
+    """
+    root = logging.getLogger()
+    ours = [h for h in root.handlers if h.get_name() == _HANDLER_NAME]
+    if not ours:
         handler = logging.StreamHandler(sys.stderr)
         handler.set_name(_HANDLER_NAME)
         handler.setFormatter(JsonFormatter())
+        for other in list(root.handlers):
+            root.removeHandler(other)
         root.addHandler(handler)
-        root.setLevel(logging.INFO)
-        root.propagate = False
+        root.setLevel(logging.WARNING)
+    logging.captureWarnings(True)
+    api = logging.getLogger("api")
+    api.setLevel(logging.INFO)
+    for stale in [h for h in api.handlers if h.get_name() == _HANDLER_NAME]:
+        api.removeHandler(stale)  # an older configuration of ours: the root one now serves
+    api.propagate = True

@@ -328,6 +328,22 @@ class EdgeOut(_Out):
     length_m: float = Field(description="Length of the whole edge, metres.")
     start_offset_m: float = Field(description="Start of the driven stretch from u, metres.")
     end_offset_m: float = Field(description="End of the driven stretch from u, metres.")
+    name: str | None = Field(description="Street name (OSM name or ref); null when unnamed.")
+    road_class: str | None = Field(description="OSM highway class (primary, residential ...).")
+    speed_limit_kph: float | None = Field(
+        description="Posted speed limit (OSM maxspeed), km/h; null when unknown."
+    )
+    entry_time: float | None = Field(
+        description="When the edge was entered, epoch seconds (interpolated between the fixes); "
+        "null without times."
+    )
+    exit_time: float | None = Field(
+        description="When the edge was left, epoch seconds; null without times."
+    )
+    duration_s: float | None = Field(description="Seconds on the edge; null without times.")
+    mean_speed_kph: float | None = Field(
+        description="Driven length over duration, km/h; null without times or when no time passed."
+    )
 
 
 class LineStringGeometry(_Out):
@@ -352,6 +368,12 @@ class SegmentProperties(_Out):
     point_range: list[int] = Field(description="[first, last] point indices it covers.")
     length_m: float = Field(description="Driven length, metres.")
     edges: list[EdgeOut] = Field(description="Edges driven, in order.")
+    start_time: float | None = Field(
+        description="When the segment starts, epoch seconds; null without times."
+    )
+    end_time: float | None = Field(
+        description="When the segment ends, epoch seconds; null without times."
+    )
 
 
 class SegmentFeature(_Out):
@@ -379,6 +401,13 @@ class PointProperties(_Out):
         description="Left out of the model (outlier, stopped car) and placed by time."
     )
     outlier: bool = Field(description="Judged an outlier.")
+    segment: int | None = Field(description="Segment the point lies on; null if unmatched.")
+    edge_index: int | None = Field(
+        description="Index of its edge in the segment's `edges`; null when not on the path."
+    )
+    along_m: float | None = Field(
+        description="Metres along the segment's path to the point; null when not on the path."
+    )
 
 
 class PointFeature(_Out):
@@ -474,7 +503,11 @@ class ErrorDetail(BaseModel):
         default=None, description="Offending field, e.g. points[3].lat, options.sigma_m."
     )
     rows: list[int] | None = Field(
-        default=None, description="Offending 0-based points (JSON) or data rows (files)."
+        default=None,
+        description="Offending 0-based points (JSON) or data rows (files); the first 100.",
+    )
+    rows_total: int | None = Field(
+        default=None, description="How many rows are at fault, when more than `rows` lists."
     )
 
 

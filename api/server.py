@@ -21,7 +21,9 @@ import uvicorn
 from uvicorn.supervisors import Multiprocess
 
 from api.app import create_app
+from api.connections import GuardedH11Protocol, ServiceConfig
 from api.errors import ServiceError
+from api.logs import configure_logging
 from api.metrics import MULTIPROC_ENV
 
 if TYPE_CHECKING:
@@ -36,6 +38,11 @@ def uvicorn_config(
     """
     The uvicorn configuration of the service: the app factory bound to ``settings``.
 
+    The connection limits come from the settings too: a request head within
+    ``header_timeout_s`` (:mod:`api.connections`), idle keep-alive connections closed after
+    ``keepalive_timeout_s``, at most ``max_connections`` connections and requests at once
+    (503 beyond), request heads of at most ``max_header_bytes``.
+
     Parameters
     ----------
     settings
@@ -47,13 +54,19 @@ def uvicorn_config(
     log_level
         uvicorn's own log level.
     """
-    return uvicorn.Config(
+    return ServiceConfig(
         functools.partial(create_app, settings),
         factory=True,
         host=host,
         port=port,
         workers=workers,
+        http=GuardedH11Protocol,
+        header_timeout_s=settings.header_timeout_s,
+        timeout_keep_alive=settings.keepalive_timeout_s,
+        limit_concurrency=settings.max_connections,
+        h11_max_incomplete_event_size=settings.max_header_bytes,
         access_log=False,  # the app writes its own JSON access log
+        log_config=None,  # uvicorn's lines go to the root logger: JSON (api.logs)
         log_level=log_level,
         lifespan="on",
         ws="none",
@@ -70,6 +83,7 @@ def serve(settings: Settings, *, host: str, port: int, workers: int, log_level: 
     ServiceError
         The server could not start (the port is taken, the address cannot be bound).
     """
+    configure_logging()  # the supervisor's own lines are JSON too
     config = uvicorn_config(settings, host=host, port=port, workers=workers, log_level=log_level)
     multiproc_dir = None
     if workers > 1 and not os.environ.get(MULTIPROC_ENV):

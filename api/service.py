@@ -3,7 +3,7 @@ What ``POST /v1/match`` does apart from HTTP, and the bounded thread pool it run
 
 Read the body, build the trace and the matcher configuration, match, and serialise.
 
-Route handlers stay thin: they read the body (:func:`read_body`) and hand it to
+Route handlers stay thin: they read the body (:func:`api.intake.read_limited_body`) and hand it to
 :meth:`MatchService.submit`, which runs :meth:`MatchService.run` in a match thread under the
 request's time budget.
 
@@ -22,19 +22,21 @@ requests of its process; numba's routing and Viterbi kernels release it (``nogil
 from __future__ import annotations
 
 import asyncio
+import inspect
 import json
+import math
 import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Final, TypeVar
+from typing import TYPE_CHECKING, Any, Final, TypeVar
 
 from pydantic import ValidationError
 from pydantic_core import from_json
 
 import mapmatch
+from api.costs import check_budget, match_cost
 from api.errors import (
-    BodyTooLargeError,
     InvalidJSONError,
     MatchTimeoutError,
     OptionError,
@@ -42,7 +44,6 @@ from api.errors import (
     RequestFieldError,
     ServiceError,
     TooManyPointsError,
-    UnsupportedMediaTypeError,
 )
 from api.schemas import MatchEnvelope, MatchQuery
 from mapmatch import OVERRIDABLE, ConfigError, InvalidTraceError, MatchConfig, TraceFileError
@@ -51,33 +52,24 @@ if TYPE_CHECKING:
     from collections.abc import Callable, Iterable, Mapping, Sequence
 
     from pydantic_core import ErrorDetails
-    from starlette.requests import Request
 
     from api.networks import NetworkRegistry
     from api.settings import Settings
 
 __all__ = [
-    "MEDIA_TYPES",
     "MatchOutcome",
     "MatchRunner",
     "MatchService",
-    "body_format",
     "parse_json",
-    "read_body",
     "validation_error",
 ]
 
 T = TypeVar("T")
 
-#: Content types ``POST /v1/match`` reads, and the trace format of each.
-MEDIA_TYPES: Final[Mapping[str, str]] = {
-    "application/json": "json",
-    "application/geo+json": "geojson",
-    "application/gpx+xml": "gpx",
-    "text/csv": "csv",
-}
 _SHOW: Final = 5  # problems quoted in one message
 _BASE_CONFIG: Final = MatchConfig()
+#: Whether the matcher can stop itself at a deadline (a cooperative check between its stages).
+_MATCH_TAKES_DEADLINE: Final = "deadline" in inspect.signature(mapmatch.match).parameters
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,54 +83,6 @@ class MatchOutcome:
     matched_points: int
     breaks: int
     seconds: float
-
-
-def body_format(content_type: str | None) -> str:
-    """
-    The trace format of a request's Content-Type (parameters such as charset are ignored).
-
-    Raises
-    ------
-    UnsupportedMediaTypeError
-        Any other content type, or none.
-
-    Examples
-    --------
-    >>> body_format("text/csv; charset=utf-8")
-    'csv'
-    """
-    media = (content_type or "").split(";", 1)[0].strip().lower()
-    fmt = MEDIA_TYPES.get(media)
-    if fmt is None:
-        shown = repr(media) if media else "no Content-Type"
-        msg = f"cannot read a body of {shown}; send one of {', '.join(MEDIA_TYPES)}"
-        raise UnsupportedMediaTypeError(msg, field="Content-Type")
-    return fmt
-
-
-async def read_body(request: Request, limit_bytes: int) -> bytes:
-    """
-    The request body, refused as soon as it is known to be over ``limit_bytes``.
-
-    Raises
-    ------
-    BodyTooLargeError
-        Content-Length, or the bytes received so far, exceed the limit.
-    """
-    msg = f"the body is larger than this service accepts ({limit_bytes:,} bytes)"
-    declared = request.headers.get("content-length", "")
-    if declared.isdigit() and int(declared) > limit_bytes:
-        msg = f"{msg}: Content-Length is {int(declared):,}; send less"
-        raise BodyTooLargeError(msg)
-    chunks: list[bytes] = []
-    size = 0
-    async for chunk in request.stream():
-        size += len(chunk)
-        if size > limit_bytes:
-            msg = f"{msg}; send less"
-            raise BodyTooLargeError(msg)
-        chunks.append(chunk)
-    return b"".join(chunks)
 
 
 class MatchRunner:
@@ -158,7 +102,7 @@ class MatchRunner:
     def __init__(self, *, threads: int, max_queued: int, budget_s: float) -> None:
         self._executor = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="match")
         self._capacity = threads + max_queued
-        self._budget_s = budget_s
+        self.budget_s = budget_s
         self._lock = threading.Lock()
         self._in_system = 0  # queued + running, abandoned ones included
 
@@ -196,17 +140,17 @@ class MatchRunner:
         future = self._executor.submit(job)
         future.add_done_callback(self._release)
         try:
-            return await asyncio.wait_for(asyncio.wrap_future(future), timeout=self._budget_s)
+            return await asyncio.wait_for(asyncio.wrap_future(future), timeout=self.budget_s)
         except TimeoutError:
             future.cancel()
             if not started.is_set():
                 msg = (
                     f"the service is busy: no match thread freed up within the "
-                    f"{self._budget_s:g} s time budget; retry shortly"
+                    f"{self.budget_s:g} s time budget; retry shortly"
                 )
                 raise OverloadedError(msg) from None
             msg = (
-                f"the match ran past the {self._budget_s:g} s time budget; send a shorter "
+                f"the match ran past the {self.budget_s:g} s time budget; send a shorter "
                 "trace, or split it"
             )
             raise MatchTimeoutError(msg) from None
@@ -235,6 +179,7 @@ class MatchService:
     def __init__(self, networks: NetworkRegistry, settings: Settings) -> None:
         self.networks = networks
         self.max_points = settings.max_points
+        self.memory_budget_mb = settings.memory_budget_mb
         self.runner = MatchRunner(
             threads=settings.match_threads,
             max_queued=settings.max_queued,
@@ -244,9 +189,12 @@ class MatchService:
     async def submit(self, body: bytes, fmt: str, query: MatchQuery) -> MatchOutcome:
         """:meth:`run` in a match thread, under the time budget."""
         self.networks.get(query.network)  # answer not_ready / unknown_network before queueing
-        return await self.runner.run(lambda: self.run(body, fmt, query))
+        deadline = time.monotonic() + self.runner.budget_s
+        return await self.runner.run(lambda: self.run(body, fmt, query, deadline=deadline))
 
-    def run(self, body: bytes, fmt: str, query: MatchQuery) -> MatchOutcome:
+    def run(
+        self, body: bytes, fmt: str, query: MatchQuery, *, deadline: float = math.inf
+    ) -> MatchOutcome:
         """
         Parse, match and serialise one trace (blocking; runs in a match thread).
 
@@ -258,6 +206,11 @@ class MatchService:
             Its format, from :func:`body_format`.
         query
             The query parameters.
+
+        deadline
+            ``time.monotonic()`` past which the caller no longer waits: checked between the
+            stages (and inside the match when :func:`mapmatch.match` takes a deadline), so an
+            abandoned request stops as early as it can and frees its thread.
 
         Raises
         ------
@@ -273,7 +226,12 @@ class MatchService:
             overrides = query.options()
         net = self.networks.get(network_id)
         config = _config(overrides)
-        result = mapmatch.match(trace, net, config, fused_distance_m=fused_m)
+        cost = match_cost(trace, config, self.networks.density(net.network_id))
+        check_budget(cost, self.memory_budget_mb, overrides)
+        self._check_deadline(deadline)
+        extra: dict[str, Any] = {"deadline": deadline} if _MATCH_TAKES_DEADLINE else {}
+        result = mapmatch.match(trace, net, config, fused_distance_m=fused_m, **extra)
+        self._check_deadline(deadline)
         content = json.dumps(result.to_geojson(), allow_nan=False, separators=(",", ":"))
         return MatchOutcome(
             content=content.encode(),
@@ -284,6 +242,11 @@ class MatchService:
             breaks=len(result.breaks),
             seconds=time.perf_counter() - started,
         )
+
+    def _check_deadline(self, deadline: float) -> None:
+        if time.monotonic() > deadline:
+            msg = f"the match ran past the {self.runner.budget_s:g} s time budget"
+            raise MatchTimeoutError(msg)
 
     def _from_json(
         self, body: bytes, query: MatchQuery
@@ -320,9 +283,23 @@ class MatchService:
         return trace, network_id, fused, {**body_options, **query_options}
 
     def _from_file(self, body: bytes, fmt: str, query: MatchQuery) -> mapmatch.Trace:
-        traces = mapmatch.read_traces(
-            body, format=fmt, default_trace_id=query.trace_id, crs=query.crs or "wgs84"
-        )
+        if fmt == "geojson":  # parsed here with a bounded parser, then by the reader
+            try:
+                doc = parse_json(body)
+            except InvalidJSONError as exc:
+                msg = f"the GeoJSON body cannot be read: {exc}"
+                raise TraceFileError(msg, format=fmt) from None
+            _check_geojson(doc, self.max_points)
+        try:
+            traces = mapmatch.read_traces(
+                body, format=fmt, default_trace_id=query.trace_id, crs=query.crs or "wgs84"
+            )
+        except (OverflowError, RecursionError):  # the readers' own parsers, past their limits
+            msg = (
+                f"the {fmt} body holds a number too large or nesting too deep to read; send "
+                "decimal numbers in their units and a flat document"
+            )
+            raise TraceFileError(msg, format=fmt) from None
         if len(traces) != 1:
             ids = ", ".join(repr(t.trace_id) for t in traces[:_SHOW])
             more = ", ..." if len(traces) > _SHOW else ""
@@ -332,6 +309,31 @@ class MatchService:
         if trace.report.input_rows > self.max_points:
             raise _too_many(trace.report.input_rows, self.max_points)
         return trace
+
+
+def _check_geojson(doc: object, limit: int) -> None:
+    """
+    Refuse a GeoJSON document with more positions than ``limit`` before it is read.
+
+    Counts Point features and the vertices of (Multi)LineStrings; the shape itself is the
+    reader's to check.
+    """
+    features = doc.get("features") if isinstance(doc, dict) else None
+    if not isinstance(features, list):
+        features = [doc]
+    count = 0
+    for feature in features:
+        geometry = feature.get("geometry") if isinstance(feature, dict) else None
+        coords = geometry.get("coordinates") if isinstance(geometry, dict) else None
+        kind = geometry.get("type") if isinstance(geometry, dict) else None
+        if kind == "LineString" and isinstance(coords, list):
+            count += len(coords)
+        elif kind == "MultiLineString" and isinstance(coords, list):
+            count += sum(len(line) for line in coords if isinstance(line, list))
+        else:
+            count += 1
+    if count > limit:
+        raise _too_many(count, limit)
 
 
 def _too_many(count: int, limit: int) -> TooManyPointsError:

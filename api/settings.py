@@ -17,6 +17,17 @@ variable                        meaning
 ``MAPMATCH_TIME_BUDGET_S``      seconds a match request may take, queueing included (30 s)
 ``MAPMATCH_MATCH_THREADS``      matches running at once in one worker process (4)
 ``MAPMATCH_MAX_QUEUED``         matches waiting for a thread before 503 ``overloaded`` (64)
+``MAPMATCH_MAX_DECOMPRESSED_BYTES``  largest body after gzip, bytes (40 MB)
+``MAPMATCH_MAX_COLUMNS``        most columns of a CSV body (256)
+``MAPMATCH_MEMORY_BUDGET_MB``   most memory one match may need, by the cost model of
+                                :mod:`api.costs` (2048 MB; more is 413 ``over_budget``)
+``MAPMATCH_HEADER_TIMEOUT_S``   seconds a connection may take to send a request's headers, and
+                                may stay idle between requests (10 s)
+``MAPMATCH_BODY_TIMEOUT_S``     seconds a request may take to send its body (30 s; 408)
+``MAPMATCH_KEEPALIVE_TIMEOUT_S``  seconds an idle keep-alive connection is kept (5 s)
+``MAPMATCH_MAX_CONNECTIONS``    connections and requests at once per worker; more answer 503
+                                at once (1024)
+``MAPMATCH_MAX_HEADER_BYTES``   largest request line plus headers, bytes (16 KiB; more: 400)
 ``MAPMATCH_ACCESS_LOG``         one JSON line per request on stderr (true)
 ``MAPMATCH_DOCS_ASSETS``        ``bundled``: ``/docs`` and ``/redoc`` load the packaged
                                 Swagger UI and ReDoc (offline); ``cdn``: FastAPI's CDN links
@@ -82,6 +93,42 @@ class Settings(BaseSettings):
     )
     max_queued: int = Field(
         default=64, ge=0, description="Matches waiting for a thread before 503 overloaded."
+    )
+    max_decompressed_bytes: int = Field(
+        default=40_000_000, ge=1024, description="Largest request body after gzip, bytes."
+    )
+    max_columns: int = Field(
+        default=256, ge=3, le=100_000, description="Most columns of a CSV body."
+    )
+    memory_budget_mb: float = Field(
+        default=2048.0,
+        gt=0,
+        allow_inf_nan=False,
+        description="Most memory one match may need (api.costs' estimate), MB.",
+    )
+    header_timeout_s: float = Field(
+        default=10.0,
+        gt=0,
+        le=3600,
+        description="Seconds to send a request's headers, and to start the next request.",
+    )
+    body_timeout_s: float = Field(
+        default=30.0, gt=0, le=3600, description="Seconds a request may take to send its body."
+    )
+    keepalive_timeout_s: int = Field(
+        default=5, ge=1, le=3600, description="Seconds an idle keep-alive connection is kept."
+    )
+    max_connections: int = Field(
+        default=1024,
+        ge=1,
+        le=1_000_000,
+        description="Connections and requests at once per worker; more answer 503 at once.",
+    )
+    max_header_bytes: int = Field(
+        default=16_384,
+        ge=1024,
+        le=1_048_576,
+        description="Largest request line plus headers, bytes.",
     )
     access_log: bool = Field(default=True, description="Write one JSON line per request.")
     docs_assets: Literal["bundled", "cdn"] = Field(

@@ -10,6 +10,15 @@ memory-mapped network once per process; PSS shares it out and is the honest tota
 
     .venv/bin/python benchmarks/bench_service.py          # 16 clients, 30 s, 1 and 2 workers
     .venv/bin/python benchmarks/bench_service.py --duration-s 5 --workers 1
+    .venv/bin/python benchmarks/bench_service.py --abuse  # also: the same load under attack
+    .venv/bin/python benchmarks/bench_service.py --cost-model  # api.costs against peak RSS
+
+``--abuse`` runs each worker count twice, quiet and then with 4 hostile clients beside the
+ordinary ones, each looping one attack: a gzip bomb (a CSV that inflates to 520 MB), a wide
+CSV (100,000 columns), a body trickled a byte at a time (or promising more than it sends), and
+options that would need gigabytes (10,000 points, 64 candidates in 200 m). It reports the
+ordinary clients' p99 against the quiet run (must stay within 2x), every 5xx on either side
+(must be 0), the hostile answers by status, and the server's memory before and after.
 
 Bounded: loopback only, a fixed duration, a fixed number of clients.
 """
@@ -66,6 +75,40 @@ class RunResult:
             f"{self.pss_before_mb:.0f} -> {self.pss_after_mb:.0f} |"
         )
 
+
+@dataclass(frozen=True)
+class AbuseResult:
+    workers: int
+    quiet_latencies_s: list[float]
+    latencies_s: list[float]
+    requests: int
+    errors: dict[str, int]
+    attacks: dict[str, dict[str, int]]
+    rss_before_mb: float
+    rss_after_mb: float
+
+    def row(self) -> str:
+        quiet = float(np.percentile(self.quiet_latencies_s, 99)) * 1000.0
+        loud = float(np.percentile(self.latencies_s, 99)) * 1000.0
+        fives = sum(n for s, n in self.errors.items() if s.startswith("5"))
+        fives += sum(n for a in self.attacks.values() for s, n in a.items() if s.startswith("5"))
+        shown = "; ".join(
+            f"{name}: " + ", ".join(f"{n} x {s}" for s, n in sorted(seen.items()))
+            for name, seen in self.attacks.items()
+        )
+        return (
+            f"| {self.workers} | {quiet:.1f} | {loud:.1f} | {loud / quiet:.2f} | "
+            f"{self.requests} | {sum(self.errors.values())} | {fives} | {shown} | "
+            f"{self.rss_before_mb:.0f} -> {self.rss_after_mb:.0f} |"
+        )
+
+
+ABUSE: list[AbuseResult] = []
+ABUSE_HEADER = (
+    "| workers | quiet p99 ms | under attack p99 ms | ratio | ordinary requests | ordinary "
+    "errors | 5xx (all) | hostile answers | server RSS MB before -> after |\n"
+    "|---|---|---|---|---|---|---|---|---|"
+)
 
 HEADER = (
     "| workers | clients | seconds | requests | req/s | p50 ms | p95 ms | p99 ms | errors "
@@ -190,6 +233,96 @@ async def load(
     return len(latencies), latencies, errors
 
 
+def _gzip_bomb() -> bytes:
+    import gzip
+    import io
+
+    out = io.BytesIO()
+    with gzip.GzipFile(fileobj=out, mode="wb", compresslevel=9) as gz:
+        gz.write(b"time,lat,lon\n")
+        block = b"1700000000,43.7384,7.4246\n" * 10_000
+        for _ in range(2_000):
+            gz.write(block)
+    return out.getvalue()
+
+
+def _costly_body() -> bytes:
+    import json
+
+    rng = np.random.default_rng(1)
+    lon = 7.4246 + np.cumsum(rng.normal(0, 5e-5, 10_000))
+    lat = 43.7384 + np.cumsum(rng.normal(0, 5e-5, 10_000))
+    points = [
+        {"time": 1_700_000_000 + i, "lat": float(y), "lon": float(x)}
+        for i, (x, y) in enumerate(zip(lon, lat, strict=True))
+    ]
+    options = {"search_radius_m": 200, "max_candidates": 64, "sigma_m": 50}
+    return json.dumps({"points": points, "options": options}).encode()
+
+
+async def _trickle(url: str, stop: float, statuses: dict[str, int]) -> None:
+    """Open a connection, promise 10 kB of CSV and send a byte a second; again and again."""
+    host, port = url.removeprefix("http://").split(":")
+    while time.perf_counter() < stop:
+        try:
+            reader, writer = await asyncio.open_connection(host, int(port))
+            writer.write(
+                b"POST /v1/match HTTP/1.1\r\nhost: x\r\ncontent-type: text/csv\r\n"
+                b"content-length: 10000\r\n\r\ntime,lat,lon\n"
+            )
+            await writer.drain()
+            answer = b""
+            while time.perf_counter() < stop and not answer:
+                writer.write(b"1")
+                await writer.drain()
+                with contextlib.suppress(TimeoutError):
+                    answer = await asyncio.wait_for(reader.read(64), timeout=1.0)
+            status = answer[9:12].decode() or "open at the end"
+            writer.close()
+        except OSError as exc:
+            status = type(exc).__name__
+        statuses[status] = statuses.get(status, 0) + 1
+
+
+async def hostile(url: str, *, duration_s: float) -> dict[str, dict[str, int]]:
+    """The 4 hostile clients, each looping its attack until ``duration_s`` has passed."""
+    stop = time.perf_counter() + duration_s
+    bomb = _gzip_bomb()
+    wide = b",".join(b"c%d" % i for i in range(100_000)) + b"\n"
+    costly = _costly_body()
+    attacks = {
+        "gzip bomb": (bomb, {"content-type": "text/csv", "content-encoding": "gzip"}),
+        "wide csv": (wide * 2, {"content-type": "text/csv"}),
+        "costly options": (costly, {"content-type": "application/json"}),
+    }
+    seen: dict[str, dict[str, int]] = {name: {} for name in [*attacks, "slow body"]}
+
+    async with httpx.AsyncClient(base_url=url, timeout=60.0) as client:
+
+        async def loop(name: str) -> None:
+            content, headers = attacks[name]
+            while time.perf_counter() < stop:
+                try:
+                    answer = await client.post("/v1/match", content=content, headers=headers)
+                    status = str(answer.status_code)
+                except httpx.HTTPError as exc:
+                    status = type(exc).__name__
+                seen[name][status] = seen[name].get(status, 0) + 1
+
+        await asyncio.gather(*(loop(n) for n in attacks), _trickle(url, stop, seen["slow body"]))
+    return seen
+
+
+async def load_under_attack(
+    url: str, bodies: list[bytes], *, clients: int, duration_s: float
+) -> tuple[tuple[int, list[float], dict[str, int]], dict[str, dict[str, int]]]:
+    ordinary, attacks = await asyncio.gather(
+        load(url, bodies, clients=clients, duration_s=duration_s),
+        hostile(url, duration_s=duration_s),
+    )
+    return ordinary, attacks
+
+
 def run(workers: int, args: argparse.Namespace, bodies: list[bytes], cache_dir: str) -> RunResult:
     log = Path(cache_dir) / f"server-{workers}.log"
     with server(workers, cache_dir, log) as (url, process):
@@ -204,6 +337,14 @@ def run(workers: int, args: argparse.Namespace, bodies: list[bytes], cache_dir: 
         if process.poll() is not None:
             msg = f"the server died under load:\n{log.read_text()[-3000:]}"
             raise SystemExit(msg)
+        if args.abuse:
+            (a_count, a_lat, a_errors), attacks = asyncio.run(
+                load_under_attack(url, bodies, clients=args.clients, duration_s=args.duration_s)
+            )
+            rss2, _pss2 = memory_mb(process.pid)
+            ABUSE.append(
+                AbuseResult(workers, latencies, a_lat, a_count, a_errors, attacks, rss1, rss2)
+            )
         metrics = httpx.get(url + "/metrics").text
     if errors:
         print(f"workers={workers}: errors {errors}", file=sys.stderr)
@@ -228,6 +369,76 @@ def run(workers: int, args: argparse.Namespace, bodies: list[bytes], cache_dir: 
     )
 
 
+COST_CONFIGS = [  # points, max_candidates, search_radius_m, sigma_m
+    (3000, 16, 50.0, 5.0),
+    (6000, 16, 50.0, 5.0),
+    (3000, 8, 20.0, 3.0),
+    (3000, 64, 50.0, 5.0),
+    (3000, 16, 200.0, 50.0),
+    (3000, 32, 100.0, 20.0),
+    (3000, 64, 200.0, 50.0),
+]
+
+
+def _one_cost(n: int, k: int, r: float, s: float, cache_dir: str) -> None:
+    """In a fresh process: peak RSS growth of one match, printed as JSON."""
+    import gc
+    import json
+    import resource
+
+    import pandas as pd
+
+    import mapmatch
+
+    net = roadnets.load(cache_dir=cache_dir)
+    cfg = SimulationConfig(interval_s=1.0, noise_m=5.0, route_length_m=3000.0)
+    trips = list(simulate_trips(net, cfg, count=30, seed=3))
+    frames, offset = [], 0.0
+    while sum(len(f) for f in frames) < n:
+        for trip in trips:
+            frame = trip.trace.to_dataframe().drop(columns="odometer", errors="ignore")
+            frame["time"] = frame["time"] - frame["time"].iloc[0] + offset
+            offset = float(frame["time"].iloc[-1]) + 1.0
+            frames.append(frame)
+    table = pd.concat(frames, ignore_index=True).iloc[:n]
+    trace = mapmatch.Trace.from_dataframe(table, trace_id="cost")
+    mapmatch.match(mapmatch.Trace.from_dataframe(table.iloc[:50]), net)  # warm up
+    gc.collect()
+    base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    now = int(Path("/proc/self/statm").read_text().split()[1]) * os.sysconf("SC_PAGE_SIZE") // 1024
+    options = {"max_candidates": k, "search_radius_m": r, "sigma_m": s, "thinning_sigmas": 0.0}
+    mapmatch.match(trace, net, mapmatch.MatchConfig().replace(options))
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    print(json.dumps({"peak_mb": (peak - max(base, now)) / 1024.0}))
+
+
+def cost_model(cache_dir: str) -> None:
+    """Peak RSS of single matches (every fix kept) against api.costs' estimate."""
+    import json
+
+    import mapmatch
+    from api.costs import CandidateDensity, match_cost
+
+    net = roadnets.load(cache_dir=cache_dir)
+    density = CandidateDensity.of(net)
+    print("| points | max_candidates | search_radius_m | sigma_m | measured MB | model MB |")
+    print("|---|---|---|---|---|---|")
+    for n, k, r, s in COST_CONFIGS:
+        out = subprocess.run(
+            [sys.executable, __file__, "--one-cost", f"{n},{k},{r},{s}", "--cache", cache_dir],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        measured = json.loads(out.stdout.strip().splitlines()[-1])["peak_mb"]
+        trace = mapmatch.Trace(
+            time=np.arange(n, dtype=float), lon=7.42 + np.arange(n) * 1e-5, lat=np.full(n, 43.73)
+        )
+        options = {"max_candidates": k, "search_radius_m": r, "sigma_m": s}
+        model = match_cost(trace, mapmatch.MatchConfig().replace(options), density).megabytes
+        print(f"| {n} | {k} | {r:g} | {s:g} | {measured:.0f} | {model:.0f} |", flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0] if __doc__ else None)
     parser.add_argument("--clients", type=int, default=16, help="concurrent clients (16)")
@@ -237,7 +448,23 @@ def main(argv: list[str] | None = None) -> int:
         "--workers", type=int, nargs="+", default=[1, 2], help="worker counts (1 2)"
     )
     parser.add_argument("--traces", type=int, default=40, help="distinct traces sent (40)")
+    parser.add_argument(
+        "--abuse", action="store_true", help="also run the load beside 4 hostile clients"
+    )
+    parser.add_argument(
+        "--cost-model", action="store_true", help="measure api.costs against peak RSS, then exit"
+    )
+    parser.add_argument("--one-cost", help=argparse.SUPPRESS)
+    parser.add_argument("--cache", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.one_cost:
+        n, k, r, s = args.one_cost.split(",")
+        _one_cost(int(n), int(k), float(r), float(s), args.cache)
+        return 0
+    if args.cost_model:
+        with tempfile.TemporaryDirectory(prefix="bench-cost-") as cache_dir:
+            cost_model(cache_dir)
+        return 0
     with tempfile.TemporaryDirectory(prefix="bench-service-") as cache_dir:
         bodies = make_bodies(args.traces, cache_dir)
         results: list[Any] = [run(w, args, bodies, cache_dir) for w in args.workers]
@@ -249,7 +476,12 @@ def main(argv: list[str] | None = None) -> int:
     print(HEADER)
     for result in results:
         print(result.row())
-    bad = [r for r in results if r.errors]
+    if ABUSE:
+        print(f"\nThe same load with 4 hostile clients beside it ({args.duration_s:.0f} s):\n")
+        print(ABUSE_HEADER)
+        for abuse in ABUSE:
+            print(abuse.row())
+    bad = [r for r in results if r.errors] + [a for a in ABUSE if a.errors]
     return 1 if bad else 0
 
 

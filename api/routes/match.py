@@ -4,19 +4,20 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Final
 
-from fastapi import APIRouter, Query, Request
+from fastapi import APIRouter, Depends, Query, Request
 from fastapi.responses import JSONResponse
 
-from api.deps import (  # noqa: TC001 - FastAPI resolves them at runtime
+from api.deps import (
     MetricsDep,
     ReadyNetworksDep,
     ServiceDep,
     SettingsDep,
+    single_valued_query,
 )
+from api.intake import MEDIA_TYPES, BodyLimits, body_format, read_limited_body
 from api.middleware import SCOPE_KEY
 from api.routes.common import error_responses
 from api.schemas import MatchQuery, MatchResponse
-from api.service import MEDIA_TYPES, body_format, read_body
 
 __all__ = ["GEOJSON", "MATCH_REQUEST_BODY", "GeoJSONResponse", "router"]
 
@@ -67,6 +68,7 @@ router = APIRouter(tags=["match"])
         "segment, then one per point. Content types read: " + ", ".join(MEDIA_TYPES) + "."
     ),
     response_class=GeoJSONResponse,
+    dependencies=[Depends(single_valued_query)],
     responses={
         200: {
             "model": MatchResponse,
@@ -87,7 +89,7 @@ async def match_trace(
 ) -> GeoJSONResponse:
     """Match the body's trace and answer its GeoJSON."""
     fmt = body_format(request.headers.get("content-type"))
-    body = await read_body(request, settings.max_body_bytes)
+    body = await read_limited_body(request, fmt, BodyLimits.of(settings))
     outcome = await service.submit(body, fmt, query)
     request.scope[SCOPE_KEY].update(
         points=outcome.points, network=outcome.network, trace_id=outcome.trace_id

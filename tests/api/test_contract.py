@@ -77,7 +77,17 @@ def test_settings_never_repeat_a_match_config_field() -> None:
 
 
 @pytest.mark.parametrize(
-    "module", ["api.errors", "api.logs", "api.service", "api.settings", "api.schemas"]
+    "module",
+    [
+        "api.errors",
+        "api.logs",
+        "api.service",
+        "api.settings",
+        "api.schemas",
+        "api.deps",
+        "api.intake",
+        "api.costs",
+    ],
 )
 def test_module_examples_hold(module: str) -> None:
     failures, tried = doctest.testmod(importlib.import_module(module))

@@ -144,18 +144,14 @@ def test_a_match_past_its_budget_answers_504_and_frees_the_worker(
         slow = httpx.post(url + "/v1/match", json={"points": bodies.points(slow_trace)}, timeout=60)
         assert slow.status_code == 504, slow.text
         assert slow.json()["error"]["code"] == "timeout"
-        # the abandoned match still holds the only thread: the next request is refused at
-        # once, and the event loop answers other routes meanwhile
-        busy = httpx.post(url + "/v1/match", json={"points": bodies.points(trip.trace)}, timeout=60)
-        assert busy.status_code == 503, busy.text
-        assert busy.json()["error"]["code"] == "overloaded"
-        assert busy.headers["retry-after"] == "1"
+        # the event loop answers other routes meanwhile, and the abandoned job stops at its
+        # next check of the deadline and gives its thread back
         assert httpx.get(url + "/healthz").status_code == 200
         runner = server.app.state.service.runner
         deadline = time.monotonic() + 60
         while runner.in_system and time.monotonic() < deadline:
             time.sleep(0.05)
-        assert runner.in_system == 0  # the thread came back when the match ended
+        assert runner.in_system == 0
 
 
 def test_waiting_matches_are_bounded(
