@@ -37,6 +37,7 @@ __all__ = [
     "BodyTooLargeError",
     "ErrorAnswer",
     "ErrorRule",
+    "IncompleteBodyError",
     "InvalidEncodingError",
     "InvalidJSONError",
     "MatchTimeoutError",
@@ -124,6 +125,10 @@ class BodyTimeoutError(ServiceError, TimeoutError):
     """The body did not arrive within ``MAPMATCH_BODY_TIMEOUT_S``."""
 
 
+class IncompleteBodyError(ServiceError, ConnectionError):
+    """The client closed the connection before its body ended."""
+
+
 class RepeatedParameterError(ServiceError, ValueError):
     """A query parameter that takes one value was given several times."""
 
@@ -158,6 +163,7 @@ class ErrorRule:
 ERROR_TABLE: Final[tuple[ErrorRule, ...]] = (
     ErrorRule(InvalidJSONError, 400, "invalid_json", "the body is not well-formed JSON"),
     ErrorRule(InvalidEncodingError, 400, "invalid_encoding", "a gzip body cannot be inflated"),
+    ErrorRule(IncompleteBodyError, 400, "incomplete_body", "the client left mid-body"),
     ErrorRule(UnauthorizedError, 401, "unauthorized", "bearer token missing or wrong"),
     ErrorRule(UnknownNetworkError, 404, "unknown_network", "no served network has that id"),
     ErrorRule(BodyTooLargeError, 413, "body_too_large", "body over MAPMATCH_MAX_BODY_BYTES"),

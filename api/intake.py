@@ -34,9 +34,12 @@ import zlib
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final
 
+from starlette.requests import ClientDisconnect
+
 from api.errors import (
     BodyTimeoutError,
     BodyTooLargeError,
+    IncompleteBodyError,
     InvalidEncodingError,
     TooManyColumnsError,
     TooManyPointsError,
@@ -265,6 +268,8 @@ async def read_limited_body(request: Request, fmt: str, limits: BodyLimits) -> b
         The gzip stream is corrupt or truncated (400).
     BodyTimeoutError
         The body did not arrive within ``body_timeout_s`` (408).
+    IncompleteBodyError
+        The client closed the connection before the end of the body (400).
     """
     gzipped = _encoding(request)
     msg = f"the body is larger than this service accepts ({limits.max_body_bytes:,} bytes)"
@@ -303,6 +308,9 @@ async def read_limited_body(request: Request, fmt: str, limits: BodyLimits) -> b
             "received); send it at once, and a Content-Length that matches it"
         )
         raise BodyTimeoutError(msg) from None
+    except ClientDisconnect:
+        msg = f"the client went away after {size:,} bytes of the body"
+        raise IncompleteBodyError(msg) from None
     if head:  # a body shorter than the gzip magic
         counter.feed(head)
         parts.append(head)

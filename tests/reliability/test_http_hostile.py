@@ -403,3 +403,19 @@ def test_every_log_line_is_json(server: Server, csv_trip: bytes) -> None:
     loggers = {line["logger"] for line in parsed}
     assert "api.access" in loggers
     assert any(line["level"] == "warning" and line["logger"] != "api.access" for line in parsed)
+
+
+def test_a_client_that_leaves_mid_body_is_not_a_server_error(server: Server) -> None:
+    for _ in range(3):
+        with _connect(server) as sock:
+            sock.sendall(
+                b"POST /v1/match HTTP/1.1\r\nhost: x\r\ncontent-type: text/csv\r\n"
+                b"content-length: 5000\r\n\r\ntime,lat,lon\n1700000000,43.7,7.42\n"
+            )
+            time.sleep(0.2)
+    time.sleep(0.5)
+    text = httpx.get(server.url + "/metrics", timeout=10).text
+    fives = [line for line in text.splitlines() if 'status="5' in line and "_total" in line]
+    assert [line for line in fives if 'route="/readyz"' not in line] == []
+    assert "incomplete_body" in text
+    server.healthy()
