@@ -24,9 +24,11 @@ from pydantic import (
 )
 
 from mapmatch import OVERRIDABLE, parameters
+from mapmatch.trace.columns import input_columns
 
 if TYPE_CHECKING:
     from mapmatch.config import Param
+    from mapmatch.trace.columns import Column
 
 __all__ = [
     "DistanceCheckOut",
@@ -81,82 +83,38 @@ TimeValue = Annotated[
 # --------------------------------------------------------------------------- request
 
 
-class PointIn(BaseModel):
+def _point_field(col: Column) -> tuple[Any, Any]:
+    """The pydantic annotation and field of one input column (:mod:`mapmatch.trace.columns`)."""
+    kind: Any = TimeValue if col.kind == "time" else float
+    annotation = kind if col.required else kind | None
+    return annotation, Field(
+        ... if col.required else None,
+        validation_alias=AliasChoices(*col.names),
+        gt=col.gt,
+        ge=col.ge,
+        le=col.le,
+        allow_inf_nan=None if col.kind == "time" else col.wraps is not None,
+        description=col.describe(),
+        examples=[col.example] if col.example is not None else None,
+    )
+
+
+class _PointBase(BaseModel):
     """One fix of the trace. Keys not listed here are ignored."""
 
     model_config = ConfigDict(extra="ignore", populate_by_name=True)
 
-    time: TimeValue | None = Field(
-        default=None,
-        validation_alias=AliasChoices("time", "t", "timestamp"),
-        description=(
-            "Epoch seconds (milli-, micro- and nanosecond epochs are recognised by size and "
-            "converted), or an ISO-8601 timestamp (naive = UTC). Aliases `t`, `timestamp`. "
-            "Optional: without a time in any point the trace is matched by distance only "
-            "(`stats.time_source` = `absent`); some points with and some without is a 422. "
-            "Points out of time order are sorted; points sharing a time are all kept in "
-            "order; a point repeating an earlier one exactly is merged; all reported in "
-            "`stats`."
-        ),
-        examples=[1700000000.0, "2023-11-14T22:13:20Z"],
-    )
-    lat: float = Field(
-        ge=-90,
-        le=90,
-        allow_inf_nan=False,
-        validation_alias=AliasChoices("lat", "latitude"),
-        description="Latitude, WGS84 degrees (alias `latitude`).",
-        examples=[43.7384],
-    )
-    lon: float = Field(
-        ge=-180,
-        le=180,
-        allow_inf_nan=False,
-        validation_alias=AliasChoices("lon", "lng", "longitude"),
-        description="Longitude, WGS84 degrees (aliases `lng`, `longitude`).",
-        examples=[7.4246],
-    )
-    heading: float | None = Field(
-        default=None,
-        allow_inf_nan=False,
-        validation_alias=AliasChoices("heading", "bearing", "course", "heading_deg"),
-        description=(
-            "Direction of travel, degrees clockwise from north (any value, taken modulo 360); "
-            "null = unknown. Aliases `bearing`, `course`, `heading_deg`."
-        ),
-    )
-    speed: float | None = Field(
-        default=None,
-        ge=0,
-        allow_inf_nan=False,
-        validation_alias=AliasChoices("speed", "speed_mps"),
-        description="Speed over ground, m/s; null = unknown. Alias `speed_mps`.",
-    )
-    accuracy: float | None = Field(
-        default=None,
-        gt=0,
-        allow_inf_nan=False,
-        validation_alias=AliasChoices("accuracy", "accuracy_m"),
-        description=(
-            "1-sigma horizontal position error, metres; widens the fix's search radius and "
-            "replaces sigma_m when larger. null = unknown. Alias `accuracy_m`."
-        ),
-    )
-    hdop: float | None = Field(
-        default=None,
-        gt=0,
-        allow_inf_nan=False,
-        description="Horizontal dilution of precision; fills an unknown accuracy as hdop x 5 m.",
-    )
-    odometer: float | None = Field(
-        default=None,
-        allow_inf_nan=False,
-        validation_alias=AliasChoices("odometer", "odometer_m"),
-        description=(
-            "Cumulative fused distance, metres, never decreasing in time; the distance check "
-            "uses last - first. null = unknown. Alias `odometer_m`."
-        ),
-    )
+
+#: One point of a JSON body, generated from the declaration of the input columns
+#: (:func:`mapmatch.trace.columns.input_columns`: names, aliases, bounds, descriptions), so the
+#: documentation says what the trace reader checks. It documents the points in OpenAPI; the
+#: points themselves go to the reader (``Trace.from_records``), which checks them.
+PointIn = create_model(
+    "PointIn",
+    __base__=_PointBase,
+    __doc__="One fix of the trace. Keys not listed here are ignored.",
+    **{col.name: _point_field(col) for col in input_columns()},  # type: ignore[call-overload]
+)
 
 
 def _option_field(meta: Param, default: object) -> tuple[Any, Any]:

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import asyncio
 import inspect
-import json
 import math
 import threading
 import time
@@ -47,6 +46,7 @@ from api.errors import (
 )
 from api.schemas import MatchEnvelope, MatchQuery
 from mapmatch import OVERRIDABLE, ConfigError, InvalidTraceError, MatchConfig, TraceFileError
+from mapmatch.export import geojson_bytes
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -232,9 +232,9 @@ class MatchService:
         extra: dict[str, Any] = {"deadline": deadline} if _MATCH_TAKES_DEADLINE else {}
         result = mapmatch.match(trace, net, config, fused_distance_m=fused_m, **extra)
         self._check_deadline(deadline)
-        content = json.dumps(result.to_geojson(), allow_nan=False, separators=(",", ":"))
+        content = geojson_bytes(result)  # written from the result's arrays
         return MatchOutcome(
-            content=content.encode(),
+            content=content,
             trace_id=result.trace_id,
             network=net.network_id,
             points=result.stats.points,
