@@ -35,6 +35,7 @@ import platform
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -218,6 +219,7 @@ def simulate_available() -> bool:
             capture_output=True,
             timeout=120,
             check=False,
+            cwd=str(Path(tempfile.gettempdir())),
         )
     except (OSError, subprocess.TimeoutExpired):
         return False
@@ -250,7 +252,10 @@ def simulate(
         cmd = [sys.executable, "-m", "mapmatch", "simulate", *args]
     else:
         cmd = [sys.executable, str(PEERS_DIR / "interim_traces.py"), *args]
-    subprocess.run(cmd, check=True, env=os.environ | SINGLE_THREAD_ENV)
+    # run from the set's folder: `-m mapmatch` must not find the working tree's package through
+    # the current directory when --ours-tree puts a snapshot on PYTHONPATH
+    out.mkdir(parents=True, exist_ok=True)
+    subprocess.run(cmd, check=True, env=os.environ | SINGLE_THREAD_ENV, cwd=str(out))
 
 
 def write_positions_only(full_csv: Path, out_csv: Path) -> tuple[int, list[str]]:
