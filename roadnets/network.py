@@ -14,7 +14,14 @@ import numpy.typing as npt
 
 from roadnets.drivable import ROAD_CLASSES
 from roadnets.names import WayNames
-from roadnets.spatial import EdgeHits, build_rtree, query_edges
+from roadnets.spatial import (
+    EdgeHits,
+    PackedTree,
+    build_packed_tree,
+    build_rtree,
+    query_packed,
+    rtree_rank,
+)
 from roadnets.turns import DEFAULT_UTURN_COST_M, TurnGraph, build_turn_graph
 
 if TYPE_CHECKING:
@@ -68,7 +75,8 @@ class RoadNetwork:
     A compiled, routable, spatially indexed directed road network.
 
     Safe to share between threads: the R-tree (libspatialindex, not thread-safe itself) is
-    queried under a lock; everything else is read-only arrays.
+    queried under a lock; :meth:`nearby_edges` uses the packed tree (:attr:`segment_tree`,
+    read-only arrays, no lock); everything else is read-only arrays.
 
     Build one with :func:`roadnets.load`. Planar work happens in :attr:`crs` (a transverse
     Mercator centred on the network, see :mod:`roadnets.projection`); lengths and offsets along
@@ -135,6 +143,18 @@ class RoadNetwork:
         """R-tree over the segments of every road geometry (bulk loaded on first use)."""
         return build_rtree(self.arrays)
 
+    @cached_property
+    def segment_tree(self) -> PackedTree:
+        """
+        The same segments in a packed R-tree queried from compiled code (the matcher's index).
+
+        Built on first use, with :attr:`rtree`'s order of the segments for ties (see
+        :mod:`roadnets.spatial`), so both give the same hits.
+        """
+        with self._rtree_lock:
+            rank = rtree_rank(self.rtree, len(self.arrays.seg_start))
+        return build_packed_tree(self.arrays, rank)
+
     def project(self, lon: FloatArray, lat: FloatArray) -> tuple[FloatArray, FloatArray]:
         """WGS84 lon/lat degrees to x/y metres in :attr:`crs`."""
         return self.projector.forward(lon, lat)
@@ -164,14 +184,8 @@ class RoadNetwork:
             Keep at most this many directed edges per point.
         """
         radius = np.asarray(radius_m, dtype=np.float64)
-        return query_edges(
-            self.rtree,
-            self.arrays,
-            x,
-            y,
-            radius,
-            max_per_point=max_per_point,
-            lock=self._rtree_lock,
+        return query_packed(
+            self.segment_tree, self.arrays, x, y, radius, max_per_point=max_per_point
         )
 
     def shortest_paths(

@@ -18,10 +18,20 @@ cost more than the search itself).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 
-__all__ = ["find_records", "gather", "group_pairs", "search_many"]
+__all__ = [
+    "find_records",
+    "gather",
+    "group_pairs",
+    "new_group_scratch",
+    "new_workspace",
+    "search_many",
+]
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -62,6 +72,44 @@ def _pop(hk, hv, size):  # type: ignore[no-untyped-def]  # pragma: no cover - co
     return key, val, size
 
 
+def new_workspace(
+    n_states: int, n_nodes: int, n_edges: int, n_trans: int, max_out: int
+) -> tuple[npt.NDArray[Any], ...]:
+    """
+    Scratch arrays for :func:`search_many`, in the clean state a search leaves them in.
+
+    A search marks what it touches and puts it back before it returns, so one workspace
+    serves every later search of a network no larger (:func:`roadnets.routes.workspace`
+    keeps one per thread): allocating and clearing these arrays, sized by the whole
+    network, cost more than a short search itself.
+    """
+    heap_cap = n_trans + 2 * n_states + 1  # one push per settle or U-turn at most
+    return (
+        np.full(n_states, np.inf),  # tent: queued key of a move onto the state
+        np.zeros(n_states),  # t_dist
+        np.zeros(n_states),  # t_time
+        np.zeros(n_states, dtype=np.int16),  # t_turn
+        np.full(n_states, -1, dtype=np.int64),  # t_pred
+        np.full(n_states, -1, dtype=np.int64),  # srec: the state's record, once settled
+        np.empty(n_states, dtype=np.int64),  # touched
+        np.full(n_nodes, -1, dtype=np.int64),  # first
+        np.full(n_nodes, np.inf),  # first_key
+        np.zeros(n_nodes, dtype=np.bool_),  # second
+        np.full(n_nodes, np.inf),  # q1: the two lowest keys of arrivals queued at a node
+        np.full(n_nodes, np.inf),  # q2
+        np.empty(n_nodes, dtype=np.int64),  # touched_nodes
+        np.full(n_edges, -1, dtype=np.int64),  # want
+        np.empty(n_states, dtype=np.int32),  # b_state
+        np.empty(n_states),  # b_dist
+        np.empty(n_states),  # b_time
+        np.empty(n_states, dtype=np.int16),  # b_turn
+        np.empty(n_states, dtype=np.int64),  # b_pred
+        np.empty(max_out + 1, dtype=np.int64),  # pend
+        np.empty(heap_cap),  # hk
+        np.empty(heap_cap, dtype=np.int64),  # hv
+    )
+
+
 @njit(cache=True, nogil=True)
 def search_many(  # type: ignore[no-untyped-def]  # pragma: no cover
     trans_ptr,
@@ -74,12 +122,12 @@ def search_many(  # type: ignore[no-untyped-def]  # pragma: no cover
     edge_time,
     edge_key,
     trans_key,
-    n_nodes,
     sources,
     bounds,
     uturn_cost,
     target_ptr,
     target_edge,
+    ws,
 ):
     """
     Bounded edge-based Dijkstra from each source state; every settled state is a record.
@@ -88,6 +136,8 @@ def search_many(  # type: ignore[no-untyped-def]  # pragma: no cover
     stops once a state of each is settled; one without explores its whole bound. Records
     are ``(state, length, time, U-turns, predecessor record)`` in settling (key) order, those
     of source ``i`` at ``ptr[i]:ptr[i + 1]``; ``target_rec`` gives each target's record.
+    ``ws`` is a workspace of :func:`new_workspace` at least as large as the network; it is
+    left clean.
 
     Keys grow by ``edge_key`` per edge (the length, or another cost), ``uturn_cost`` per
     U-turn and, when ``trans_key`` is not empty, ``trans_key[k]`` for transition ``k`` (then
@@ -103,30 +153,31 @@ def search_many(  # type: ignore[no-untyped-def]  # pragma: no cover
     """
     n_states = len(state_edge)
     turn_costs = len(trans_key) > 0
-    tent = np.full(n_states, np.inf)  # queued key of a move onto the state
-    t_dist = np.zeros(n_states)
-    t_time = np.zeros(n_states)
-    t_turn = np.zeros(n_states, dtype=np.int16)
-    t_pred = np.full(n_states, -1, dtype=np.int64)
-    srec = np.full(n_states, -1, dtype=np.int64)  # the state's record, once settled
-    touched = np.empty(n_states, dtype=np.int64)
-    first = np.full(n_nodes, -1, dtype=np.int64)
-    first_key = np.full(n_nodes, np.inf)
-    second = np.zeros(n_nodes, dtype=np.bool_)
-    q1 = np.full(n_nodes, np.inf)  # the two lowest keys of arrivals queued at a node
-    q2 = np.full(n_nodes, np.inf)
-    touched_nodes = np.empty(n_nodes, dtype=np.int64)
-    want = np.full(len(edge_len), -1, dtype=np.int64)
+    (
+        tent,
+        t_dist,
+        t_time,
+        t_turn,
+        t_pred,
+        srec,
+        touched,
+        first,
+        first_key,
+        second,
+        q1,
+        q2,
+        touched_nodes,
+        want,
+        b_state,
+        b_dist,
+        b_time,
+        b_turn,
+        b_pred,
+        pend,
+        hk,
+        hv,
+    ) = ws
     target_local = np.full(max(len(target_edge), 1), -1, dtype=np.int64)
-    b_state = np.empty(n_states, dtype=np.int32)
-    b_dist = np.empty(n_states)
-    b_time = np.empty(n_states)
-    b_turn = np.empty(n_states, dtype=np.int16)
-    b_pred = np.empty(n_states, dtype=np.int64)
-    pend = np.empty(int(np.max(np.diff(trans_ptr))) + 1 if n_states else 1, dtype=np.int64)
-    heap_cap = len(trans_to) + 2 * n_states + 1  # one push per settle or U-turn at most
-    hk = np.empty(heap_cap)
-    hv = np.empty(heap_cap, dtype=np.int64)
     cap = max(1024, 16 * len(sources))
     r_state = np.empty(cap, dtype=np.int32)
     r_dist = np.empty(cap)
@@ -310,15 +361,17 @@ def find_records(ptr, state, order, rank, wanted):  # type: ignore[no-untyped-de
 
 
 @njit(cache=True, nogil=True)
-def group_pairs(from_edge, to_edge, bounds, n_edges):  # type: ignore[no-untyped-def]  # pragma: no cover
+def group_pairs(from_edge, to_edge, bounds, scratch):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
-    Group edge pairs by source for :func:`search_many`, in ``O(pairs + edges)``.
+    Group edge pairs by source for :func:`search_many`, in ``O(pairs)``.
 
     Returns the sorted distinct sources, each one's largest bound, the CSR of its distinct
-    target edges, and for each pair the index of its target in that CSR.
+    target edges, and for each pair the index of its target in that CSR. ``scratch`` is
+    ``(slot, mark, position)``, three arrays of one entry per edge, the first two -1
+    throughout (:func:`new_group_scratch`); they are left so.
     """
     n = len(from_edge)
-    slot = np.full(n_edges, -1, dtype=np.int64)
+    slot, mark, position = scratch
     found = np.empty(n, dtype=np.int64)
     n_src = 0
     for i in range(n):
@@ -343,8 +396,6 @@ def group_pairs(from_edge, to_edge, bounds, n_edges):  # type: ignore[no-untyped
         r = rank[slot[from_edge[i]]]
         by_source[fill[r]] = i
         fill[r] += 1
-    mark = np.full(n_edges, -1, dtype=np.int64)
-    position = np.empty(n_edges, dtype=np.int64)
     target_ptr = np.zeros(n_src + 1, dtype=np.int64)
     target_edge = np.empty(n, dtype=np.int64)
     pair_target = np.empty(n, dtype=np.int64)
@@ -360,7 +411,19 @@ def group_pairs(from_edge, to_edge, bounds, n_edges):  # type: ignore[no-untyped
                 count += 1
             pair_target[i] = position[e]
         target_ptr[r + 1] = count
+    for i in range(n):
+        slot[from_edge[i]] = -1
+        mark[to_edge[i]] = -1
     return sources, src_bound, target_ptr, target_edge[:count], pair_target
+
+
+def new_group_scratch(n_edges: int) -> tuple[npt.NDArray[np.int64], ...]:
+    """The scratch arrays of :func:`group_pairs` for a network of ``n_edges`` edges."""
+    return (
+        np.full(n_edges, -1, dtype=np.int64),
+        np.full(n_edges, -1, dtype=np.int64),
+        np.empty(n_edges, dtype=np.int64),
+    )
 
 
 @njit(cache=True, nogil=True)

@@ -30,13 +30,21 @@ about what a node-based one does.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
-from roadnets.route_search import find_records, gather, group_pairs, search_many
+from roadnets.route_search import (
+    find_records,
+    gather,
+    group_pairs,
+    new_group_scratch,
+    new_workspace,
+    search_many,
+)
 from roadnets.turns import DEFAULT_UTURN_COST_M
 
 if TYPE_CHECKING:
@@ -240,6 +248,80 @@ class EdgeRoutes:
         return self.table.path(rec)
 
 
+#: Per network (by the identity of its arrays and turn graph): the arrays a search reads.
+_GRAPHS: dict[tuple[int, int], tuple[NetworkArrays, TurnGraph, tuple[npt.NDArray[Any], ...]]] = {}
+_local = threading.local()
+
+
+def search_graph(arrays: NetworkArrays, turns: TurnGraph) -> tuple[npt.NDArray[Any], ...]:
+    """
+    The network arrays :func:`~roadnets.route_search.search_many` reads, made once per network.
+
+    ``(trans_ptr, trans_to, state_edge, plain, edge_v, edge_twin, edge_length_m, edge_time,
+    edge_key, trans_key)`` for searches by length without turn costs (each edge's free-flow
+    time computed once, not per search). Kept for the last few networks searched.
+    """
+    key = (id(arrays), id(turns))
+    found = _GRAPHS.get(key)
+    if found is not None and found[0] is arrays and found[1] is turns:
+        return found[2]
+    edge_time = arrays.edge_length_m / arrays.edge_speed_mps
+    edge_time.flags.writeable = False
+    graph = (
+        turns.trans_ptr,
+        turns.trans_to,
+        turns.state_edge,
+        turns.plain,
+        arrays.edge_v,
+        arrays.edge_twin,
+        arrays.edge_length_m,
+        edge_time,
+        arrays.edge_length_m,
+        np.zeros(0),
+    )
+    if len(_GRAPHS) >= 8:
+        _GRAPHS.pop(next(iter(_GRAPHS)))
+    _GRAPHS[key] = (arrays, turns, graph)
+    return graph
+
+
+def scratch(
+    arrays: NetworkArrays, turns: TurnGraph
+) -> tuple[tuple[npt.NDArray[Any], ...], tuple[npt.NDArray[np.int64], ...]]:
+    """
+    The search workspace and pair-grouping scratch of the calling thread, for the network.
+
+    One per thread (the searches run without the GIL, several threads at once), grown to
+    the largest network searched; a search leaves it clean, so it is reused by every later
+    search instead of allocating and clearing arrays of the network's size each time.
+    """
+    need = (turns.n_states, arrays.n_nodes, arrays.n_edges, len(turns.trans_to), _max_out(turns))
+    held = getattr(_local, "scratch", None)
+    if held is not None and all(n <= h for n, h in zip(need, held[0], strict=True)):
+        return held[1], held[2]
+    sizes = need if held is None else tuple(max(n, h) for n, h in zip(need, held[0], strict=True))
+    search_ws = new_workspace(*sizes)
+    group_ws = new_group_scratch(sizes[2])
+    _local.scratch = (sizes, search_ws, group_ws)
+    return search_ws, group_ws
+
+
+#: Most transitions out of one state, per turn graph (by identity).
+_MAX_OUT: dict[int, tuple[TurnGraph, int]] = {}
+
+
+def _max_out(turns: TurnGraph) -> int:
+    """Most transitions out of one state of ``turns``."""
+    cached = _MAX_OUT.get(id(turns))
+    if cached is not None and cached[0] is turns:
+        return cached[1]
+    value = int(np.max(np.diff(turns.trans_ptr))) if turns.n_states else 0
+    if len(_MAX_OUT) >= 8:
+        _MAX_OUT.pop(next(iter(_MAX_OUT)))
+    _MAX_OUT[id(turns)] = (turns, value)
+    return value
+
+
 def _gather(table: RouteTable, rec: IntArray) -> tuple[FloatArray, FloatArray, IntArray]:
     dist, time, turns = gather(rec, table.distance_m, table.time_s, table.uturns)
     return dist, time, turns
@@ -262,25 +344,21 @@ def _search(
     trans_key = _costs(turn_cost, len(turns.trans_to), "turn_cost", np.zeros(0))
     # the pruning at junctions assumes a U-turn is the only move with a cost of its own
     plain = turns.plain if turn_cost is None else np.zeros(turns.n_states, dtype=np.bool_)
-    edge_time = arrays.edge_length_m / arrays.edge_speed_mps
-    ptr, state, dist, time, uturns, pred, target_rec = search_many(
-        turns.trans_ptr,
-        turns.trans_to,
-        turns.state_edge,
+    graph = search_graph(arrays, turns)
+    args = (
+        *graph[:3],
         plain,
-        arrays.edge_v,
-        arrays.edge_twin,
-        arrays.edge_length_m,
-        edge_time,
+        *graph[4:8],
         edge_key,
         trans_key,
-        arrays.n_nodes,
         sources,
         bounds,
         float(uturn_cost_m),
         target_ptr,
         target_edge,
+        scratch(arrays, turns)[0],
     )
+    ptr, state, dist, time, uturns, pred, target_rec = search_many(*args)
     if len(state) >= 2**31:
         msg = (
             f"{len(state):,} route records do not fit one table; search fewer sources or "
@@ -427,7 +505,7 @@ def route_pairs(
         rec = table.records(a, b)
         return EdgeRoutes(a, b, *_gather(table, rec), rec, table)
     src, src_bound, target_ptr, target_edge, pair_target = group_pairs(
-        a, b, np.ascontiguousarray(bounds), arrays.n_edges
+        a, b, np.ascontiguousarray(bounds), scratch(arrays, turns)[1]
     )
     cost = (uturn_cost_m, edge_cost, turn_cost)
     found, target_rec = _search(arrays, turns, src, src_bound, cost, target_ptr, target_edge)

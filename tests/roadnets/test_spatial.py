@@ -7,6 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from roadnets.spatial import PACKED_FANOUT, query_edges, query_packed, rtree_rank
+
 if TYPE_CHECKING:
     import roadnets
 
@@ -33,6 +35,17 @@ def _brute_force(
     return out
 
 
+def _query(
+    net: roadnets.RoadNetwork, index: str, x: np.ndarray, y: np.ndarray, radius: float, **kw: int
+) -> roadnets.EdgeHits:
+    """The nearby-edge query through one of the two indexes."""
+    r = np.full(len(x), radius)
+    if index == "rtree":
+        return query_edges(net.rtree, net.arrays, x, y, r, **kw)
+    return query_packed(net.segment_tree, net.arrays, x, y, r, **kw)
+
+
+@pytest.mark.parametrize("index", ["rtree", "packed"])
 @settings(max_examples=60)
 @given(
     fx=st.floats(min_value=0.0, max_value=1.0),
@@ -40,12 +53,12 @@ def _brute_force(
     radius=st.floats(min_value=1.0, max_value=120.0),
 )
 def test_rtree_query_agrees_with_a_brute_force_scan(
-    oakland_net: roadnets.RoadNetwork, fx: float, fy: float, radius: float
+    oakland_net: roadnets.RoadNetwork, index: str, fx: float, fy: float, radius: float
 ) -> None:
     a = oakland_net.arrays
     x = a.geom_x.min() - 50 + fx * (np.ptp(a.geom_x) + 100)
     y = a.geom_y.min() - 50 + fy * (np.ptp(a.geom_y) + 100)
-    hits = oakland_net.nearby_edges(np.array([x]), np.array([y]), radius)
+    hits = _query(oakland_net, index, np.array([x]), np.array([y]), radius)
     expected = _brute_force(oakland_net, x, y, radius)
     found: dict[int, tuple[float, float]] = {}
     for e, d, o in zip(hits.edge, hits.distance_m, hits.offset_m, strict=True):
@@ -143,3 +156,77 @@ def test_issue_5_concurrent_queries_from_many_threads_agree(
     for hits in results:
         assert np.array_equal(hits.edge, expected.edge)
         assert np.array_equal(hits.offset_m, expected.offset_m)
+
+
+_FIELDS = ("point", "edge", "distance_m", "offset_m", "x", "y", "bearing_deg")
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(min_value=0, max_value=2**32 - 1),
+    spread=st.floats(min_value=0.0, max_value=60.0),
+    radius=st.sampled_from([3.0, 20.0, 50.0, 80.0, 200.0]),
+    top=st.sampled_from([None, 1, 3, 16]),
+)
+def test_packed_tree_gives_the_rtree_query_row_for_row(
+    melbourne_net: roadnets.RoadNetwork,
+    default_net: roadnets.RoadNetwork,
+    seed: int,
+    spread: float,
+    radius: float,
+    top: int | None,
+) -> None:
+    # points at and around the roads' vertices, where two segments of a road tie, and some
+    # anywhere in the box; both indexes must keep the same rows, bit for bit
+    kw = {} if top is None else {"max_per_point": top}
+    rng = np.random.default_rng(seed)
+    for net in (melbourne_net, default_net):
+        a = net.arrays
+        v = rng.integers(0, len(a.geom_x), 300)
+        x = a.geom_x[v] + rng.normal(0.0, spread + 1e-9, 300) * (rng.random(300) < 0.7)
+        y = a.geom_y[v] + rng.normal(0.0, spread + 1e-9, 300) * (rng.random(300) < 0.7)
+        x[:20] = rng.uniform(a.geom_x.min() - 300, a.geom_x.max() + 300, 20)
+        want = _query(net, "rtree", x, y, radius, **kw)
+        got = _query(net, "packed", x, y, radius, **kw)
+        for name in _FIELDS:
+            assert np.array_equal(getattr(want, name), getattr(got, name)), name
+
+
+def test_rtree_lists_every_query_in_one_global_order(melbourne_net: roadnets.RoadNetwork) -> None:
+    # what the packed tree's tie order rests on: libspatialindex walks its tree depth first,
+    # so the hits of any box come in the order of a query that covers every box
+    tree = melbourne_net.rtree
+    a = melbourne_net.arrays
+    rank = rtree_rank(tree, len(a.seg_start))
+    assert sorted(rank.tolist()) == list(range(len(a.seg_start)))
+    rng = np.random.default_rng(11)
+    cx = rng.uniform(a.geom_x.min(), a.geom_x.max(), 200)
+    cy = rng.uniform(a.geom_y.min(), a.geom_y.max(), 200)
+    half = rng.uniform(5.0, 400.0, 200)
+    ids, counts = tree.intersection_v(
+        np.column_stack((cx - half, cy - half)), np.column_stack((cx + half, cy + half))
+    )
+    start = 0
+    for count in counts.tolist():
+        found = rank[np.asarray(ids[start : start + count], dtype=np.int64)]
+        assert np.all(np.diff(found) > 0)
+        start += count
+
+
+def test_packed_tree_nodes_cover_their_children(oakland_net: roadnets.RoadNetwork) -> None:
+    tree = oakland_net.segment_tree
+    n_seg = len(oakland_net.arrays.seg_start)
+    assert sorted(tree.item_seg.tolist()) == list(range(n_seg))
+    leaves = np.arange(tree.n_inner, len(tree.box))
+    covered = np.zeros(n_seg, dtype=int)
+    for node in range(len(tree.box)):
+        lo, hi = int(tree.child_lo[node]), int(tree.child_hi[node])
+        assert 0 < hi - lo <= PACKED_FANOUT
+        inner = tree.item_box[lo:hi] if node in leaves else tree.box[lo:hi]
+        assert np.all(inner[:, :2] >= tree.box[node, :2])
+        assert np.all(inner[:, 2:] <= tree.box[node, 2:])
+        if node >= tree.n_inner:
+            covered[tree.item_seg[lo:hi]] += 1
+        else:
+            assert np.all(np.arange(lo, hi) > node)  # children come after their parent
+    assert np.all(covered == 1)  # every segment in exactly one leaf

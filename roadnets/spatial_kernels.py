@@ -1,0 +1,273 @@
+"""The compiled probe of a :class:`~roadnets.spatial.PackedTree` and the nearby-edge query.
+
+Separate from :mod:`roadnets.spatial` so that importing roadnets does not import numba.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = ["nearby_kernel"]
+
+
+#: How much a packed tree's probe box is widened, metres: a segment the exact distance test
+#: keeps is never missed by the box test because of rounding.
+_PROBE_PAD_M = 1e-6
+
+
+@njit(cache=True, nogil=True)
+def _grow(a, size):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """``a`` copied into an array of at least ``size`` entries (twice as long, or more)."""
+    out = np.empty(max(2 * len(a), size), dtype=a.dtype)
+    out[: len(a)] = a
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _probe(box, child_lo, child_hi, n_inner, item_box, item_seg, x0, y0, x1, y1, stack, found):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Segments whose box meets ``[x0, x1] x [y0, y1]``, into ``found``; (count, found)."""
+    n_found = 0
+    top = 0
+    stack[0] = 0
+    top = 1
+    while top > 0:
+        top -= 1
+        node = stack[top]
+        if box[node, 0] > x1 or box[node, 2] < x0 or box[node, 1] > y1 or box[node, 3] < y0:
+            continue
+        if node < n_inner:
+            for c in range(child_lo[node], child_hi[node]):
+                if top >= len(stack):
+                    stack = _grow(stack, top + 1)
+                stack[top] = c
+                top += 1
+        else:
+            for k in range(child_lo[node], child_hi[node]):
+                if (
+                    item_box[k, 0] > x1
+                    or item_box[k, 2] < x0
+                    or item_box[k, 1] > y1
+                    or item_box[k, 3] < y0
+                ):
+                    continue
+                if n_found >= len(found):
+                    found = _grow(found, n_found + 1)
+                found[n_found] = item_seg[k]
+                n_found += 1
+    return n_found, found, stack
+
+
+@njit(cache=True, nogil=True)
+def nearby_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    box,
+    child_lo,
+    child_hi,
+    n_inner,
+    item_box,
+    item_seg,
+    rank,
+    seg_start,
+    seg_edge,
+    geom_x,
+    geom_y,
+    geom_cum,
+    edge_twin,
+    edge_length,
+    x,
+    y,
+    radius,
+    max_per_point,
+    separation,
+):
+    """
+    Every directed edge within ``radius[i]`` of each point, projected, nearest first.
+
+    The compiled body of :func:`roadnets.spatial.query_packed`: the rows of
+    :func:`roadnets.spatial.query_edges` in the same order. Per point, the segments the
+    tree finds are projected in ``rank`` order and kept within the radius; the nearest place
+    of each edge (and any other one ``separation`` metres along it, as
+    ``roadnets.spatial._nearest_places`` keeps them) stays, the reverse twin of each is
+    added, and the rows are sorted by distance, then edge; at most ``max_per_point`` are
+    kept (``<= 0``: all). Returns ``(ptr, edge, distance, offset, x, y, dx, dy, twin)``,
+    the rows of point ``i`` at ``ptr[i]:ptr[i + 1]``: each row's segment direction
+    ``(dx, dy)`` and whether it is the reverse twin of the edge found, from which
+    :func:`roadnets.spatial.bearings` makes the bearing.
+    """
+    n = len(x)
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    cap = max(16, n * (max_per_point if max_per_point > 0 else 16))
+    out_f = np.empty((cap, 6))  # distance, offset, x, y, dx, dy of each row kept
+    out_i = np.empty((cap, 2), dtype=np.int64)  # edge, reverse twin (1) or not (0)
+    stack = np.empty(256, dtype=np.int64)
+    found = np.empty(256, dtype=np.int64)
+    # one point's rows: those found (0..m-1), then the twins of those kept
+    row_f = np.empty((512, 6))
+    row_e = np.empty(512, dtype=np.int64)
+    order = np.empty(512, dtype=np.int64)
+    local = np.empty(512, dtype=np.int64)
+    count = 0
+    for i in range(n):
+        px, py, r = x[i], y[i], radius[i]
+        pad = r + _PROBE_PAD_M
+        n_found, found, stack = _probe(
+            box, child_lo, child_hi, n_inner, item_box, item_seg,
+            px - pad, py - pad, px + pad, py + pad, stack, found,
+        )  # fmt: skip
+        ptr[i + 1] = count
+        if n_found == 0:
+            continue
+        _sort_by_rank(found, n_found, rank)
+        if 2 * n_found > len(row_e):
+            size = 2 * n_found
+            row_f = np.empty((size, 6))
+            row_e = np.empty(size, dtype=np.int64)
+            order = np.empty(size, dtype=np.int64)
+            local = np.empty(size, dtype=np.int64)
+        # project in rank order, keep those within the radius
+        m = 0
+        for k in range(n_found):
+            seg = found[k]
+            start = seg_start[seg]
+            ax, ay = geom_x[start], geom_y[start]
+            dx, dy = geom_x[start + 1] - ax, geom_y[start + 1] - ay
+            seg_len2 = dx * dx + dy * dy
+            t = ((px - ax) * dx + (py - ay) * dy) / seg_len2 if seg_len2 > 0 else 0.0
+            t = min(max(t, 0.0), 1.0)
+            qx, qy = ax + t * dx, ay + t * dy
+            d = np.hypot(px - qx, py - qy)
+            if not d <= r:
+                continue
+            row_e[m] = seg_edge[seg]
+            row_f[m, 0] = d
+            row_f[m, 1] = geom_cum[start] + t * (geom_cum[start + 1] - geom_cum[start])
+            row_f[m, 2] = qx
+            row_f[m, 3] = qy
+            row_f[m, 4] = dx
+            row_f[m, 5] = dy
+            order[m] = m
+            m += 1
+        if m == 0:
+            continue
+        # the nearest place of each edge (and others far enough along it), by edge and offset
+        _sort_rows(order, m, row_e, row_f, 1, True)
+        n_local = 0
+        for k in range(m):
+            row = order[k]
+            same_prev = k > 0 and row_e[order[k - 1]] == row_e[row]
+            same_next = k + 1 < m and row_e[order[k + 1]] == row_e[row]
+            d = row_f[row, 0]
+            if (not same_prev or d <= row_f[order[k - 1], 0]) and (
+                not same_next or d <= row_f[order[k + 1], 0]
+            ):
+                local[n_local] = row
+                n_local += 1
+        n_keep = 0
+        for k in range(n_local):  # order[] now takes the rows kept, by edge and offset
+            row = local[k]
+            if k > 0:
+                prev = local[k - 1]
+                close = row_e[prev] == row_e[row] and row_f[row, 1] - row_f[prev, 1] < separation
+                if close and row_f[row, 0] >= row_f[prev, 0]:
+                    continue
+            if k + 1 < n_local:
+                nxt = local[k + 1]
+                close = row_e[nxt] == row_e[row] and row_f[nxt, 1] - row_f[row, 1] < separation
+                if close and row_f[row, 0] > row_f[nxt, 0]:
+                    continue
+            order[n_keep] = row
+            n_keep += 1
+        # the kept places, then their reverse twins (rows m..), sorted by distance, then edge
+        total = n_keep
+        for k in range(n_keep):
+            row = order[k]
+            twin = edge_twin[row_e[row]]
+            if twin >= 0:
+                j = m + total - n_keep
+                row_e[j] = twin
+                row_f[j, 0] = row_f[row, 0]
+                row_f[j, 1] = edge_length[twin] - row_f[row, 1]
+                for c in range(2, 6):
+                    row_f[j, c] = row_f[row, c]
+                order[total] = j
+                total += 1
+        _sort_rows(order, total, row_e, row_f, 0, False)
+        take = total if max_per_point <= 0 else min(total, max_per_point)
+        if count + take > len(out_i):
+            size = max(2 * len(out_i), count + take)
+            grown_f = np.empty((size, 6))
+            grown_f[:count] = out_f[:count]
+            grown_i = np.empty((size, 2), dtype=np.int64)
+            grown_i[:count] = out_i[:count]
+            out_f, out_i = grown_f, grown_i
+        for k in range(take):
+            row = order[k]
+            e = row_e[row]
+            out_i[count, 0] = e
+            out_i[count, 1] = 1 if row >= m else 0
+            out_f[count, 0] = row_f[row, 0]
+            out_f[count, 1] = min(max(row_f[row, 1], 0.0), edge_length[e])
+            for c in range(2, 6):
+                out_f[count, c] = row_f[row, c]
+            count += 1
+        ptr[i + 1] = count
+    return (
+        ptr,
+        out_i[:count, 0].copy(),
+        out_f[:count, 0].copy(),
+        out_f[:count, 1].copy(),
+        out_f[:count, 2].copy(),
+        out_f[:count, 3].copy(),
+        out_f[:count, 4].copy(),
+        out_f[:count, 5].copy(),
+        out_i[:count, 1] == 1,
+    )
+
+
+@njit(cache=True, nogil=True)
+def _sort_by_rank(found, n, rank):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """Sort ``found[:n]`` (distinct segments) by their rank, in place."""
+    if n > 64:
+        keys = np.empty(n, dtype=np.int64)
+        for k in range(n):
+            keys[k] = rank[found[k]]
+        by = np.argsort(keys)
+        found[:n] = found[:n][by]
+        return
+    for k in range(1, n):
+        item = found[k]
+        key = rank[item]
+        j = k - 1
+        while j >= 0 and rank[found[j]] > key:
+            found[j + 1] = found[j]
+            j -= 1
+        found[j + 1] = item
+
+
+@njit(cache=True, nogil=True)
+def _sort_rows(order, n, row_e, row_f, col, edge_first):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Stable sort of ``order[:n]`` by edge, then ``row_f[:, col]`` (or the other way round)."""
+    if n > 64:
+        part = order[:n].copy()
+        if edge_first:
+            part = part[np.argsort(row_f[part, col], kind="mergesort")]
+            part = part[np.argsort(row_e[part], kind="mergesort")]
+        else:
+            part = part[np.argsort(row_e[part], kind="mergesort")]
+            part = part[np.argsort(row_f[part, col], kind="mergesort")]
+        order[:n] = part
+        return
+    for k in range(1, n):
+        item = order[k]
+        e, v = row_e[item], row_f[item, col]
+        j = k - 1
+        while j >= 0:
+            other = order[j]
+            oe, ov = row_e[other], row_f[other, col]
+            by_edge = oe > e or (oe == e and ov > v)
+            by_value = ov > v or (ov == v and oe > e)
+            if not (by_edge if edge_first else by_value):
+                break
+            order[j + 1] = other
+            j -= 1
+        order[j + 1] = item
