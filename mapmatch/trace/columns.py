@@ -1,6 +1,8 @@
 """
 The input columns of a trace, each declared once: name, aliases, unit, kind, bounds, doc.
 
+(Over 400 lines on purpose: the declaration is the documentation of every column.)
+
 Every place that knows the columns reads them from here: :class:`~mapmatch.trace.Trace`
 validation (which column is required, the bounds and their messages), every reader (the
 names a GPX tag, a GeoJSON property or a CSV header may use, the id columns a table is

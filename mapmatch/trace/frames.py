@@ -1,0 +1,120 @@
+"""
+Tables as trace input: which column gives which field, and what a reader knew of the rows.
+
+A table's columns are matched to the fields of :mod:`mapmatch.trace.columns` by name
+(aliases, any case); two columns for one field and a missing required column are errors
+naming the columns found. A reader's :class:`~mapmatch.trace.readers.RawTrace` becomes the
+field columns plus an :class:`~mapmatch.trace.report.Origin` (its line numbers, segments and
+dropped records) for :func:`~mapmatch.trace.validation.validate`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from mapmatch.errors import InvalidTraceError
+from mapmatch.trace.checks import SHOW
+from mapmatch.trace.columns import FIELD_ALIASES, canonical, input_columns
+from mapmatch.trace.readers import RawTrace, id_columns, read_raw_traces
+from mapmatch.trace.report import Origin, in_source
+
+if TYPE_CHECKING:
+    from collections.abc import Hashable, Iterable
+
+    import pandas as pd
+
+    from mapmatch.types import IntArray
+
+__all__ = ["frame_columns", "raw_origin", "resolve_columns", "single_raw"]
+
+_REQUIRED = tuple(c.name for c in input_columns(required_only=True))
+
+
+def resolve_columns(
+    columns: Iterable[Hashable], *, trace_id: str, origin: Origin
+) -> dict[str, Hashable]:
+    """Canonical field -> the column naming it; two columns for one field is an error."""
+    found: dict[str, list[Hashable]] = {}
+    for col in columns:
+        field = canonical(col)
+        if field is not None:
+            found.setdefault(field, []).append(col)
+    for field, cols in found.items():
+        if len(cols) > 1:
+            both = " and ".join(repr(str(c)) for c in cols)
+            msg = (
+                f"trace {trace_id!r}{in_source(origin)}: columns {both} both give {field!r}; "
+                "drop or rename all but one"
+            )
+            raise InvalidTraceError(msg, trace_id=trace_id, field=field)
+    return {field: cols[0] for field, cols in found.items()}
+
+
+def frame_columns(df: pd.DataFrame, *, trace_id: str, origin: Origin) -> dict[str, object]:
+    """
+    The field columns of a table (canonical name -> column), the reader's segments added.
+
+    Raises
+    ------
+    InvalidTraceError
+        A required column is missing, or two columns give one field.
+    """
+    names = resolve_columns(df.columns, trace_id=trace_id, origin=origin)
+    missing = [f for f in _REQUIRED if f not in names]
+    if missing:
+        found = ", ".join(repr(str(c)) for c in df.columns) or "none"
+        need = "; ".join(f"{f!r} (or {', '.join(FIELD_ALIASES[f][1:])})" for f in missing)
+        msg = (
+            f"trace {trace_id!r}{in_source(origin)}: missing required column(s) {need}; "
+            f"found columns: {found}; rename the columns (names are case-insensitive)"
+        )
+        raise InvalidTraceError(msg, trace_id=trace_id, field=missing[0])
+    columns: dict[str, object] = {f: df[col] for f, col in names.items()}
+    if origin.segment is not None and "segment" not in columns:
+        columns["segment"] = origin.segment
+    return columns
+
+
+def raw_origin(raw: RawTrace) -> Origin:
+    """What a reader knew about its rows, for messages and the report."""
+    numbers: IntArray | None = raw.numbers
+    source: str | None = raw.source
+    if raw.label == "table row":
+        source = None
+        if np.array_equal(raw.numbers, np.arange(len(raw.numbers))):
+            numbers = None  # the whole table in order: "row 5" says it all
+    return Origin(
+        source=source,
+        label=raw.label,
+        numbers=numbers,
+        segment=raw.segment,
+        dropped=raw.dropped,
+        notes=raw.notes,
+    )
+
+
+def single_raw(df: pd.DataFrame, *, trace_id: str | None, id_column: str | None) -> RawTrace:
+    """
+    The one trace of a table, named ``trace_id`` when given.
+
+    Raises
+    ------
+    InvalidTraceError
+        The id columns hold several traces.
+    """
+    raws = read_raw_traces(df, default_trace_id=trace_id or "trace", id_column=id_column)
+    if len(raws) > 1:
+        cols = " / ".join(id_columns([str(c) for c in df.columns], id_column=id_column))
+        shown = ", ".join(repr(r.trace_id) for r in raws[:SHOW])
+        more = f" and {len(raws) - SHOW} more" if len(raws) > SHOW else ""
+        name = trace_id or raws[0].trace_id
+        msg = (
+            f"trace {name!r}: the {cols} column holds {len(raws)} ids ({shown}{more}); "
+            f"use mapmatch.read_traces or split the table by {cols}"
+        )
+        raise InvalidTraceError(msg, trace_id=name, field="trace_id")
+    raw = raws[0]
+    return raw if trace_id is None else dataclasses.replace(raw, trace_id=trace_id)
