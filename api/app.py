@@ -20,6 +20,8 @@ from typing import TYPE_CHECKING, Any
 
 from fastapi import FastAPI
 from fastapi.exceptions import RequestValidationError
+from fastapi.middleware.cors import CORSMiddleware
+from fastapi.middleware.gzip import GZipMiddleware
 from fastapi.openapi.utils import get_openapi
 from fastapi.responses import Response
 from starlette.exceptions import HTTPException as StarletteHTTPException
@@ -120,6 +122,17 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(
         ServiceMiddleware, token=token, metrics=metrics, access_log=settings.access_log
     )
+    if settings.gzip_min_bytes:  # inside CORS, outside auth: error answers are gzipped too
+        app.add_middleware(GZipMiddleware, minimum_size=settings.gzip_min_bytes, compresslevel=5)
+    if settings.cors_origins:  # outermost: a preflight carries no token
+        app.add_middleware(
+            CORSMiddleware,
+            allow_origins=list(settings.cors_origins),
+            allow_methods=["GET", "POST"],
+            allow_headers=["Authorization", "Content-Type", "Content-Encoding", "X-Request-ID"],
+            expose_headers=["X-Request-ID", "Retry-After"],
+            max_age=600,
+        )
     app.openapi = lambda: _openapi(app, secured=token is not None)  # type: ignore[method-assign]
     return app
 

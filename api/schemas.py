@@ -201,6 +201,20 @@ class MatchEnvelope(BaseModel):
     options: MatchOptions | None = Field(
         default=None, description="Matcher parameters to override for this request."
     )
+    polyline: str | None = Field(
+        default=None,
+        min_length=2,
+        description="The positions as an encoded polyline (Google's format, as OSRM and "
+        "Valhalla write it) instead of `points`; `precision` says its decimals, `times` may "
+        "give one time per position.",
+    )
+    precision: Literal[5, 6] = Field(
+        default=5, description="Decimals of `polyline`: 5, or 6 (OSRM's polyline6, Valhalla)."
+    )
+    times: list[TimeValue] | None = Field(
+        default=None,
+        description="With `polyline`: one time per position (epoch seconds or ISO-8601).",
+    )
 
 
 class MatchRequest(MatchEnvelope):
@@ -223,11 +237,13 @@ class MatchRequest(MatchEnvelope):
         },
     )
 
-    points: list[PointIn] = Field(
+    points: list[PointIn] | None = Field(
+        default=None,
         min_length=2,
         description=(
             "The fixes, at least 2 with distinct times, at most the server's limit "
-            "(MAPMATCH_MAX_POINTS, 100 000 by default; more is a 413)."
+            "(MAPMATCH_MAX_POINTS, 100 000 by default; more is a 413). Required unless "
+            "`polyline` gives the positions."
         ),
     )
 
@@ -255,6 +271,13 @@ class MatchQuery(MatchOptions):
         default=None, ge=0, le=1e8, allow_inf_nan=False, description=_FUSED_DESCRIPTION
     )
     crs: _CRS | None = Field(default=None, description=_CRS_DESCRIPTION + " Default wgs84.")
+    polyline: int | None = Field(
+        default=None,
+        ge=5,
+        le=6,
+        description="Also give each segment's path as an encoded polyline of this many "
+        "decimals (5, or 6 for polyline6), in the segment's `properties.polyline`.",
+    )
 
     def options(self) -> dict[str, object]:
         """The matcher options among the query parameters."""
@@ -326,6 +349,11 @@ class SegmentProperties(_Out):
     point_range: list[int] = Field(description="[first, last] point indices it covers.")
     length_m: float = Field(description="Driven length, metres.")
     edges: list[EdgeOut] = Field(description="Edges driven, in order.")
+    polyline: str | None = Field(
+        default=None,
+        description="The path as an encoded polyline, only when the request asks "
+        "(`?polyline=5` or `6`).",
+    )
     start_time: float | None = Field(
         description="When the segment starts, epoch seconds; null without times."
     )

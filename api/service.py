@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import asyncio
 import inspect
+import json
 import math
 import threading
 import time
@@ -44,6 +45,7 @@ from api.errors import (
     ServiceError,
     TooManyPointsError,
 )
+from api.polyline import PolylineError, decode, encode
 from api.schemas import MatchEnvelope, MatchQuery
 from mapmatch import OVERRIDABLE, ConfigError, InvalidTraceError, MatchConfig, TraceFileError
 from mapmatch.export import geojson_bytes
@@ -232,7 +234,10 @@ class MatchService:
         extra: dict[str, Any] = {"deadline": deadline} if _MATCH_TAKES_DEADLINE else {}
         result = mapmatch.match(trace, net, config, fused_distance_m=fused_m, **extra)
         self._check_deadline(deadline)
-        content = geojson_bytes(result)  # written from the result's arrays
+        if query.polyline is None:
+            content = geojson_bytes(result)  # written from the result's arrays
+        else:
+            content = _with_polylines(result, query.polyline)
         return MatchOutcome(
             content=content,
             trace_id=result.trace_id,
@@ -263,6 +268,8 @@ class MatchService:
             envelope = MatchEnvelope.model_validate(doc)
         except ValidationError as exc:
             raise validation_error(exc.errors(include_url=False)) from None
+        if envelope.polyline is not None:
+            points = _polyline_points(envelope, points)
         given = envelope.model_fields_set
         for name in ("network", "trace_id", "fused_distance_m", "crs"):
             if name in given and getattr(query, name) is not None:
@@ -378,6 +385,41 @@ def parse_json(body: bytes) -> object:
     except ValueError as exc:
         msg = f"the body is not valid JSON: {exc}"
         raise InvalidJSONError(msg) from None
+
+
+def _polyline_points(envelope: MatchEnvelope, points: object) -> list[dict[str, object]]:
+    """The points of a ``polyline`` body (with its ``times``), as the reader takes them."""
+    if points is not None:
+        msg = 'give the positions once: "points" or "polyline", not both'
+        raise RequestFieldError(msg, field="polyline")
+    assert envelope.polyline is not None
+    try:
+        positions = decode(envelope.polyline, envelope.precision)
+    except PolylineError as exc:
+        msg = f"polyline: {exc}; send Google's encoded polyline format"
+        raise RequestFieldError(msg, field="polyline") from None
+    times = envelope.times
+    if times is not None and len(times) != len(positions):
+        msg = (
+            f"times has {len(times)} values for the polyline's {len(positions)} positions; "
+            "give one per position"
+        )
+        raise RequestFieldError(msg, field="times")
+    out: list[dict[str, object]] = [{"lat": lat, "lon": lon} for lat, lon in positions]
+    if times is not None:
+        for point, t in zip(out, times, strict=True):
+            point["time"] = t
+    return out
+
+
+def _with_polylines(result: mapmatch.MatchResult, precision: int) -> bytes:
+    """The GeoJSON answer with each segment's path also as an encoded polyline."""
+    doc = result.to_geojson()
+    for feature in doc["features"]:
+        if feature["properties"].get("kind") == "segment":
+            coords = feature["geometry"]["coordinates"]
+            feature["properties"]["polyline"] = encode(((y, x) for x, y in coords), precision)
+    return json.dumps(doc, allow_nan=False, separators=(",", ":")).encode()
 
 
 def _check_points(points: object, limit: int) -> None:

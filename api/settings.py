@@ -28,6 +28,10 @@ variable                        meaning
 ``MAPMATCH_MAX_CONNECTIONS``    connections and requests at once per worker; more answer 503
                                 at once (1024)
 ``MAPMATCH_MAX_HEADER_BYTES``   largest request line plus headers, bytes (16 KiB; more: 400)
+``MAPMATCH_GZIP_MIN_BYTES``     answers at least this long are gzipped for a client that sends
+                                ``Accept-Encoding: gzip`` (1000; 0 = never)
+``MAPMATCH_CORS_ORIGINS``       browser origins allowed to call the service (CORS), a JSON
+                                list or separated by ``,``; ``*`` = any; empty = no CORS
 ``MAPMATCH_ACCESS_LOG``         one JSON line per request on stderr (true)
 ``MAPMATCH_DOCS_ASSETS``        ``bundled``: ``/docs`` and ``/redoc`` load the packaged
                                 Swagger UI and ReDoc (offline); ``cdn``: FastAPI's CDN links
@@ -130,6 +134,15 @@ class Settings(BaseSettings):
         le=1_048_576,
         description="Largest request line plus headers, bytes.",
     )
+    gzip_min_bytes: int = Field(
+        default=1000,
+        ge=0,
+        description="Gzip answers at least this long when the client accepts gzip; 0 = never.",
+    )
+    cors_origins: Annotated[tuple[str, ...], NoDecode] = Field(
+        default=(),
+        description="Browser origins allowed to call the service (CORS); '*' = any.",
+    )
     access_log: bool = Field(default=True, description="Write one JSON line per request.")
     docs_assets: Literal["bundled", "cdn"] = Field(
         default="bundled",
@@ -146,6 +159,17 @@ class Settings(BaseSettings):
         if text.startswith("["):
             return tuple(json.loads(text))
         return tuple(part for part in text.split(os.pathsep) if part.strip())
+
+    @field_validator("cors_origins", mode="before")
+    @classmethod
+    def _split_origins(cls, value: object) -> object:
+        """Accept a JSON list or a comma-separated string of origins."""
+        if not isinstance(value, str):
+            return value
+        text = value.strip()
+        if text.startswith("["):
+            return tuple(json.loads(text))
+        return tuple(part.strip() for part in text.split(",") if part.strip())
 
     @field_validator("token", mode="after")
     @classmethod

@@ -49,6 +49,7 @@ if TYPE_CHECKING:
     from collections.abc import Iterator
 
 ROOT = Path(__file__).resolve().parents[1]
+MATCH_THREADS: list[int] = []  # --match-threads, when given
 POINTS = 100
 
 
@@ -177,6 +178,7 @@ def server(
     command = [
         sys.executable, "-m", "mapmatch", "serve", "--host", "127.0.0.1", "--port", str(port),
         "--workers", str(workers), "--cache-dir", cache_dir, "--no-access-log",
+        *(["--match-threads", str(MATCH_THREADS[0])] if MATCH_THREADS else []),
     ]  # fmt: skip
     with log.open("wb") as sink:
         process = subprocess.Popen(command, stdout=sink, stderr=sink, env=env, cwd=ROOT)
@@ -449,6 +451,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--traces", type=int, default=40, help="distinct traces sent (40)")
     parser.add_argument(
+        "--match-threads", type=int, default=None, help="matches at once per worker (serve's)"
+    )
+    parser.add_argument(
         "--abuse", action="store_true", help="also run the load beside 4 hostile clients"
     )
     parser.add_argument(
@@ -457,6 +462,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--one-cost", help=argparse.SUPPRESS)
     parser.add_argument("--cache", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.match_threads:
+        MATCH_THREADS.append(args.match_threads)
     if args.one_cost:
         n, k, r, s = args.one_cost.split(",")
         _one_cost(int(n), int(k), float(r), float(s), args.cache)

@@ -141,5 +141,5 @@ def test_openapi_documents_every_field_and_the_option_bounds(client: httpx.Clien
         "text/csv",
     }
     query = {p["name"] for p in spec["paths"]["/v1/match"]["post"]["parameters"]}
-    assert query == OVERRIDABLE | {"network", "trace_id", "fused_distance_m", "crs"}
+    assert query == OVERRIDABLE | {"network", "trace_id", "fused_distance_m", "crs", "polyline"}
     assert client.get("/docs").status_code == 200
