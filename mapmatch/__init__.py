@@ -32,6 +32,7 @@ from mapmatch.result import (
 )
 
 if TYPE_CHECKING:
+    from mapmatch.batch.many import match_many
     from mapmatch.matcher import match
     from mapmatch.trace import Trace, TraceReport, read_traces
 
@@ -39,6 +40,7 @@ if TYPE_CHECKING:
 #: kernels and the trace readers' pandas load on the first match or trace): name -> module.
 _LAZY = {
     "match": "mapmatch.matcher",
+    "match_many": "mapmatch.batch.many",
     "Trace": "mapmatch.trace",
     "TraceReport": "mapmatch.trace",
     "read_traces": "mapmatch.trace",
@@ -80,6 +82,7 @@ __all__ = [
     "TraceFileError",
     "TraceReport",
     "match",
+    "match_many",
     "parameters",
     "read_traces",
 ]

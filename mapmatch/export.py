@@ -24,7 +24,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from itertools import pairwise
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -44,21 +44,33 @@ from mapmatch._jsontext import (
 from mapmatch._timing import PathPositions, edge_times, path_positions
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
+    import geopandas as gpd  # type: ignore[import-untyped]
     import pandas as pd
 
     from mapmatch.result import MatchResult, Segment
-    from mapmatch.types import FloatArray, IntArray
+    from mapmatch.types import BoolArray, FloatArray, IntArray
 
 __all__ = [
     "COORD_DIGITS",
+    "CRS",
+    "CSV_TIME_FORMAT",
+    "GEO_KINDS",
+    "TABLE_FORMATS",
     "EdgeTable",
+    "GeoKind",
     "PathPositions",
     "edge_table",
     "edges_frame",
+    "geodataframe",
     "geojson_bytes",
     "geojson_dict",
     "path_positions",
     "points_frame",
+    "segments_frame",
+    "write_geopackage",
+    "write_table",
 ]
 
 #: Decimals of coordinates (degrees) in the GeoJSON: about 1 cm.
@@ -363,6 +375,16 @@ def _feature_tables(result: MatchResult) -> tuple[Table, Table]:
 
 # --------------------------------------------------------------------------- tables
 
+#: What :func:`geodataframe` (``MatchResult.to_geodataframe``) makes one row of.
+GeoKind = Literal["segments", "edges", "points"]
+GEO_KINDS: tuple[GeoKind, ...] = ("segments", "edges", "points")
+#: Formats of :func:`write_table`; ``gpkg`` holds every kind as a layer (:func:`write_geopackage`).
+TABLE_FORMATS = ("csv", "parquet", "geoparquet")
+#: How CSV files write times: ISO 8601, UTC, to the microsecond.
+CSV_TIME_FORMAT = "%Y-%m-%dT%H:%M:%S.%fZ"
+#: The coordinate reference system of every geometry written (WGS84 lon/lat).
+CRS = "EPSG:4326"
+
 
 def _utc(epoch_s: FloatArray) -> pd.DatetimeIndex:
     """Epoch seconds as UTC datetimes to the microsecond (NaT for NaN)."""
@@ -371,58 +393,69 @@ def _utc(epoch_s: FloatArray) -> pd.DatetimeIndex:
     return pd.to_datetime(epoch_s, unit="s", utc=True).as_unit("us")
 
 
+def _nullable(values: IntArray, valid: BoolArray | None = None) -> pd.arrays.IntegerArray:
+    """Integers as pandas ``Int64``, null outside ``valid``."""
+    import pandas as pd
+
+    mask = np.zeros(len(values), dtype=bool) if valid is None else ~np.asarray(valid, dtype=bool)
+    return pd.arrays.IntegerArray(np.asarray(values, dtype=np.int64), mask)
+
+
 def points_frame(result: MatchResult) -> pd.DataFrame:
     """
     One row per fix: time, raw and snapped position, edge, place on the path, confidence.
 
-    Columns ``trace_id``, ``index``, ``time``, ``raw_lon``, ``raw_lat``, ``matched``,
-    ``segment``, ``lon``, ``lat``, ``u``, ``v``, ``key``, ``offset_m``, ``distance_m``,
-    ``confidence``, ``interpolated``, ``outlier``, ``edge_index`` (the fix's edge in its
-    segment's list, the ``order`` of :func:`edges_frame`) and ``along_m`` (metres along the
-    segment's path).
+    Columns ``trace_id``, ``index``, ``time`` (UTC; null without times), ``raw_lon``,
+    ``raw_lat``, ``matched``, ``segment``, ``lon``, ``lat``, ``u``, ``v``, ``key``,
+    ``offset_m``, ``distance_m``, ``confidence``, ``interpolated``, ``outlier``,
+    ``edge_index`` (the fix's edge in its segment's list: the ``order`` of
+    :func:`edges_frame`) and ``along_m`` (metres along the segment's path). ``segment``,
+    ``u``, ``v``, ``key`` and ``edge_index`` are ``Int64``, null for an unmatched fix.
     """
     import pandas as pd
 
     p = result.points
+    n = len(p.time_s)
+    matched = np.asarray(p.matched, dtype=bool)
     positions = path_positions(result)
     return pd.DataFrame(
         {
-            "trace_id": result.trace_id,
-            "index": np.arange(len(p.time_s)),
-            "time": p.time_s,
+            "trace_id": np.full(n, result.trace_id, dtype=object),
+            "index": np.arange(n, dtype=np.int64),
+            "time": _utc(p.time_s),
             "raw_lon": p.raw_lon,
             "raw_lat": p.raw_lat,
-            "matched": p.matched,
-            "segment": p.segment,
+            "matched": matched,
+            "segment": _nullable(p.segment, matched),
             "lon": p.lon,
             "lat": p.lat,
-            "u": p.u,
-            "v": p.v,
-            "key": p.key,
+            "u": _nullable(p.u, matched),
+            "v": _nullable(p.v, matched),
+            "key": _nullable(p.key, matched),
             "offset_m": p.offset_m,
             "distance_m": p.distance_m,
             "confidence": p.confidence,
-            "interpolated": p.interpolated,
-            "outlier": p.outlier,
-            "edge_index": positions.edge_index,
+            "interpolated": np.asarray(p.interpolated, dtype=bool),
+            "outlier": np.asarray(p.outlier, dtype=bool),
+            "edge_index": _nullable(positions.edge_index, positions.edge_index >= 0),
             "along_m": positions.along_m,
         }
     )
 
 
-def edges_frame(result: MatchResult) -> pd.DataFrame:
+def edges_frame(result: MatchResult, table: EdgeTable | None = None) -> pd.DataFrame:
     """
     One row per driven edge, segments in order (the columns of :class:`EdgeTable`).
 
     Columns ``trace_id``, ``segment``, ``order``, ``first_point``, ``last_point``, ``u``,
-    ``v``, ``key``, ``osm_way_ids`` (way ids joined by ``;``), ``name`` (null for an
-    unnamed road), ``road_class``, ``speed_limit_kph``, ``length_m``, ``start_offset_m``,
+    ``v``, ``key``, ``osm_way_id`` (``Int64``), ``name`` (null for an unnamed road),
+    ``road_class``, ``speed_limit_kph``, ``length_m``, ``start_offset_m``,
     ``end_offset_m``, ``entry_time`` / ``exit_time`` (UTC; null without times),
     ``duration_s`` and ``mean_speed_kph``.
     """
     import pandas as pd
 
-    t = edge_table(result)
+    t = table if table is not None else edge_table(result)
     return pd.DataFrame(
         {
             "trace_id": np.full(len(t), result.trace_id, dtype=object),
@@ -430,10 +463,10 @@ def edges_frame(result: MatchResult) -> pd.DataFrame:
             "order": t.order,
             "first_point": t.first_point,
             "last_point": t.last_point,
-            "u": t.u,
-            "v": t.v,
-            "key": t.key,
-            "osm_way_ids": t.way_id.astype(str).astype(object),
+            "u": _nullable(t.u),
+            "v": _nullable(t.v),
+            "key": _nullable(t.key),
+            "osm_way_id": _nullable(t.way_id),
             "name": np.array([n or None for n in t.name], dtype=object),
             "road_class": np.array(t.road_class, dtype=object),
             "speed_limit_kph": t.speed_limit_kph,
@@ -446,3 +479,137 @@ def edges_frame(result: MatchResult) -> pd.DataFrame:
             "mean_speed_kph": t.mean_speed_kph,
         }
     )
+
+
+def segments_frame(result: MatchResult, table: EdgeTable | None = None) -> pd.DataFrame:
+    """
+    One row per segment: its fixes, edges, length, start and end time, mean speed.
+
+    Columns ``trace_id``, ``segment``, ``first_point``, ``last_point``, ``edges`` (how
+    many), ``length_m``, ``start_time`` / ``end_time`` (UTC; null without times),
+    ``duration_s`` and ``mean_speed_kph``.
+    """
+    import pandas as pd
+
+    t = table if table is not None else edge_table(result)
+    segs = result.segments
+    bounds = np.concatenate(([0], np.cumsum([len(s.edge) for s in segs], dtype=np.int64)))
+    start, end = _segment_times(t, bounds)
+    length = np.array([s.length_m for s in segs], dtype=np.float64)
+    duration = end - start
+    with np.errstate(invalid="ignore", divide="ignore"):
+        speed = np.where(duration > 0, 3.6 * length / duration, np.nan)
+    return pd.DataFrame(
+        {
+            "trace_id": np.full(len(segs), result.trace_id, dtype=object),
+            "segment": np.array([s.index for s in segs], dtype=np.int64),
+            "first_point": np.array([s.first for s in segs], dtype=np.int64),
+            "last_point": np.array([s.last for s in segs], dtype=np.int64),
+            "edges": np.diff(bounds),
+            "length_m": length,
+            "start_time": _utc(start),
+            "end_time": _utc(end),
+            "duration_s": duration,
+            "mean_speed_kph": speed,
+        }
+    )
+
+
+def geodataframe(result: MatchResult, kind: GeoKind = "segments") -> gpd.GeoDataFrame:
+    """
+    A table of the result with geometries, WGS84 (:data:`CRS`).
+
+    Parameters
+    ----------
+    result
+        A match.
+    kind
+        ``"segments"``: :func:`segments_frame` with each segment's LineString;
+        ``"edges"``: :func:`edges_frame` with the LineString of each driven stretch;
+        ``"points"``: :func:`points_frame` with each fix's snapped Point (none when
+        unmatched).
+
+    Raises
+    ------
+    ValueError
+        ``kind`` is none of those.
+    """
+    import geopandas as gpd
+    import shapely
+
+    if kind == "points":
+        frame = points_frame(result)
+        p = result.points
+        geometry = np.asarray(shapely.points(np.column_stack((p.lon, p.lat))), dtype=object)
+        geometry[~np.asarray(p.matched, dtype=bool)] = None
+    elif kind == "edges":
+        frame = edges_frame(result)
+        parts = [s.stretches for s in result.segments]
+        geometry = _lines(
+            [st.lon for st in parts], [st.lat for st in parts], [np.diff(st.ptr) for st in parts]
+        )
+    elif kind == "segments":
+        frame = segments_frame(result)
+        lons = [s.lon if len(s.lon) > 1 else np.repeat(s.lon, 2) for s in result.segments]
+        lats = [s.lat if len(s.lat) > 1 else np.repeat(s.lat, 2) for s in result.segments]
+        geometry = _lines(lons, lats, [np.array([len(x)]) for x in lons])
+    else:
+        msg = f"unknown kind {kind!r}; use one of {', '.join(GEO_KINDS)}"
+        raise ValueError(msg)
+    return gpd.GeoDataFrame(frame, geometry=geometry, crs=CRS)
+
+
+def _lines(lons: list[FloatArray], lats: list[FloatArray], sizes: list[IntArray]) -> Any:
+    """LineStrings of consecutive runs (``sizes`` long) of the vertices, vectorised."""
+    import shapely
+
+    counts = np.concatenate(sizes) if sizes else np.zeros(0, dtype=np.int64)
+    if len(counts) == 0:
+        return np.array([], dtype=object)
+    coords = np.column_stack((np.concatenate(lons), np.concatenate(lats)))
+    return shapely.linestrings(coords, indices=np.repeat(np.arange(len(counts)), counts))
+
+
+def write_table(result: MatchResult, kind: GeoKind, path: Path, fmt: str) -> None:
+    """
+    Write one table of a result to a file.
+
+    Parameters
+    ----------
+    result
+        A match.
+    kind
+        ``"segments"``, ``"edges"`` or ``"points"``.
+    path
+        The file (created or replaced).
+    fmt
+        ``"csv"`` (times ISO 8601 UTC, :data:`CSV_TIME_FORMAT`; nulls empty), ``"parquet"``
+        (the dtypes kept) or ``"geoparquet"`` (with geometry and GeoParquet metadata, read
+        back by ``geopandas.read_parquet``).
+    """
+    if fmt == "geoparquet":
+        geodataframe(result, kind).to_parquet(path, index=False)
+        return
+    frames = {"segments": segments_frame, "edges": edges_frame, "points": points_frame}
+    frame = frames[kind](result)
+    if fmt == "csv":
+        frame.to_csv(path, index=False, date_format=CSV_TIME_FORMAT)
+    elif fmt == "parquet":
+        frame.to_parquet(path, index=False)
+    else:
+        msg = f"unknown table format {fmt!r}; use one of {', '.join(TABLE_FORMATS)}"
+        raise ValueError(msg)
+
+
+def write_geopackage(result: MatchResult, path: Path) -> None:
+    """
+    Write every table of a result into one GeoPackage, a layer each (segments, edges, points).
+
+    ``geopandas.read_file(path, layer="edges")`` reads a layer back; integer columns with
+    nulls read as floats unless read through Arrow with nullable types (``use_arrow=True,
+    arrow_to_pandas_kwargs={"types_mapper": ...}``), the file itself keeps them integers.
+    """
+    if path.exists() and path.stat().st_size == 0:
+        path.unlink()  # a placeholder (atomic writes make one): GDAL wants no file or a GeoPackage
+    for kind in GEO_KINDS:
+        geodataframe(result, kind).to_file(path, layer=kind, driver="GPKG", engine="pyogrio")

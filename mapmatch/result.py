@@ -14,10 +14,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
+    import geopandas as gpd  # type: ignore[import-untyped]
     import pandas as pd
 
     from mapmatch.config import MatchConfig
     from mapmatch.distance import DistanceCheck
+    from mapmatch.export import GeoKind
     from mapmatch.types import BoolArray, FloatArray, IntArray
     from roadnets import RoadNetwork
 
@@ -29,6 +31,7 @@ __all__ = [
     "MatchedEdge",
     "MatchedPoints",
     "Segment",
+    "Stretches",
 ]
 
 
@@ -147,6 +150,7 @@ class Segment:
         "_lat",
         "_lon",
         "_net",
+        "_stretches",
         "edge",
         "end_offset_m",
         "first",
@@ -168,8 +172,9 @@ class Segment:
         attributes: EdgeAttributes | None = None,
         lon: FloatArray | None = None,
         lat: FloatArray | None = None,
+        stretches: Stretches | None = None,
     ) -> None:
-        if net is None and (attributes is None or lon is None or lat is None):
+        if net is None and (attributes is None or lon is None or lat is None or stretches is None):
             msg = "Segment needs the network, or its attributes and geometry"
             raise ValueError(msg)
         self.index, self.first, self.last = int(index), int(first), int(last)
@@ -179,6 +184,7 @@ class Segment:
         self._net = net
         self._attributes = attributes
         self._lon, self._lat = lon, lat
+        self._stretches = stretches
         self._edges: list[MatchedEdge] | None = None
 
     def __repr__(self) -> str:
@@ -196,7 +202,12 @@ class Segment:
             self.start_offset_m,
             self.end_offset_m,
         )
-        known = {"attributes": self.attributes, "lon": self.lon, "lat": self.lat}
+        known = {
+            "attributes": self.attributes,
+            "lon": self.lon,
+            "lat": self.lat,
+            "stretches": self.stretches,
+        }
         return (_restore_segment, (path, known))
 
     @property
@@ -270,6 +281,60 @@ class Segment:
     def lat(self) -> FloatArray:
         """Latitudes of the path's vertices, WGS84 degrees, in driving order."""
         return self._geometry()[1]
+
+    @property
+    def stretches(self) -> Stretches:
+        """The line of each driven stretch on its own (one per edge), WGS84."""
+        if self._stretches is None:
+            assert self._net is not None  # checked in __init__
+            self._stretches = Stretches.of_path(
+                self._net, self.edge, self.start_offset_m, self.end_offset_m
+            )
+        return self._stretches
+
+
+@dataclass(frozen=True, slots=True)
+class Stretches:
+    """
+    The lines of the stretches of a path, one per edge.
+
+    Stretch ``i`` has the vertices ``lon[ptr[i]:ptr[i + 1]]``, ``lat[ptr[i]:ptr[i + 1]]``
+    (WGS84 degrees, driving order, at least two: the ends).
+    """
+
+    lon: FloatArray
+    lat: FloatArray
+    ptr: IntArray
+
+    @classmethod
+    def of_path(
+        cls, net: RoadNetwork, edge: IntArray, start_m: FloatArray, end_m: FloatArray
+    ) -> Stretches:
+        """
+        Cut the network's geometry: each edge between its two offsets, ends interpolated.
+
+        Vectorised over the stretches (the edge's vertices strictly between the offsets are
+        kept, in order).
+        """
+        a = net.arrays
+        n = len(edge)
+        sizes = a.edge_geom_ptr[edge + 1] - a.edge_geom_ptr[edge]
+        owner = np.repeat(np.arange(n), sizes)
+        first = np.repeat(a.edge_geom_ptr[edge] - np.cumsum(sizes) + sizes, sizes)
+        vertex = first + np.arange(int(sizes.sum()))
+        along = a.geom_cum_m[vertex]
+        inner = (along > start_m[owner]) & (along < end_m[owner])
+        ends_x, ends_y = net.point_on_edge(
+            np.concatenate((edge, edge)), np.concatenate((start_m, end_m))
+        )
+        x = np.concatenate((ends_x[:n], a.geom_x[vertex[inner]], ends_x[n:]))
+        y = np.concatenate((ends_y[:n], a.geom_y[vertex[inner]], ends_y[n:]))
+        key_owner = np.concatenate((np.arange(n), owner[inner], np.arange(n)))
+        key_along = np.concatenate((start_m - 1.0, along[inner], end_m + 1.0))
+        order = np.lexsort((key_along, key_owner))
+        lon, lat = net.unproject(x[order], y[order])
+        ptr = np.concatenate(([0], np.cumsum(np.bincount(key_owner, minlength=n))))
+        return cls(lon=lon, lat=lat, ptr=np.asarray(ptr, dtype=np.int64))
 
 
 def _restore_segment(args: tuple[Any, ...], known: dict[str, Any]) -> Segment:
@@ -466,3 +531,24 @@ class MatchResult:
         from mapmatch.export import points_frame
 
         return points_frame(self)
+
+    def to_geodataframe(self, kind: GeoKind = "segments") -> gpd.GeoDataFrame:
+        """
+        The result as a GeoPandas table in WGS84 (EPSG:4326), one row per ``kind``.
+
+        Parameters
+        ----------
+        kind
+            ``"segments"`` (LineString of each connected piece; the default), ``"edges"``
+            (LineString of each driven stretch, with street, class, speed limit, entry and
+            exit time) or ``"points"`` (the snapped Point of each fix; none when unmatched).
+
+        Returns
+        -------
+        geopandas.GeoDataFrame
+            OSM ids as nullable integers (``Int64``, null where unmatched), flags as bools,
+            times as ``datetime64[us, UTC]``; see :func:`mapmatch.export.geodataframe`.
+        """
+        from mapmatch.export import geodataframe
+
+        return geodataframe(self, kind)

@@ -6,19 +6,34 @@ All three take a picklable, module-level function and a list of tasks and yield
 or the exception that ended the task (a crashed worker, a lost connection ...), so that the
 caller records the failure and goes on. No scheduling of our own: the local pool is
 :class:`concurrent.futures.ProcessPoolExecutor`, the cluster is ``dask.distributed``.
+
+An executor may hold a ``shared`` object (a road network): it reaches every worker once
+(the pool's initialiser, ``Client.scatter`` on Dask) and each task is called as
+``fn(task, shared)``; without one, ``fn(task)``.
+
+Faults: a task whose worker process died (killed, out of memory) is run once more in a fresh
+pool (:meth:`ProcessExecutor.run`'s ``retry`` says how: the same task, or smaller ones);
+only a task lost twice is yielded with its :class:`WorkerLostError` error. Workers die with the
+process that started them: each watches a pipe from its parent and exits when the parent is
+gone, killed or not, so no orphaned worker goes on matching and writing.
 """
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
+import sys
+import threading
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
-from typing import TYPE_CHECKING, Protocol, TypeVar
+from concurrent.futures.process import BrokenProcessPool
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 from mapmatch.errors import MapMatchError
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterator, Sequence
+    from multiprocessing.connection import Connection
     from multiprocessing.context import BaseContext
 
 __all__ = [
@@ -27,6 +42,8 @@ __all__ = [
     "InlineExecutor",
     "ProcessExecutor",
     "SchedulerError",
+    "WorkerLostError",
+    "available_cores",
     "make_executor",
 ]
 
@@ -38,6 +55,18 @@ class SchedulerError(MapMatchError, OSError):
     """The Dask scheduler cannot be reached, or ``dask.distributed`` is not installed."""
 
 
+class WorkerLostError(MapMatchError, RuntimeError):
+    """The worker process running a task died, and died again when the task was retried."""
+
+
+def available_cores() -> int:
+    """Cores this process may run on (its CPU affinity), at least 1."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
 class Executor(Protocol):
     """Runs tasks and yields each with its outcome as it finishes."""
 
@@ -47,7 +76,11 @@ class Executor(Protocol):
     description: str
 
     def run(
-        self, fn: Callable[[T], R], tasks: Sequence[T]
+        self,
+        fn: Callable[..., R],
+        tasks: Sequence[T],
+        *,
+        retry: Callable[[T], Sequence[T]] | None = None,
     ) -> Iterator[tuple[T, R | BaseException]]:
         """Yield ``(task, fn(task) or the exception it raised)`` in order of completion."""
         ...
@@ -57,19 +90,32 @@ class Executor(Protocol):
         ...
 
 
+_NO_SHARED = object()
+
+
 class InlineExecutor:
     """Runs tasks one after the other in this process (``--workers 1``)."""
 
     slots = 1
     description = "1 process (in-process)"
 
+    def __init__(self, *, shared: object = _NO_SHARED) -> None:
+        self._shared = shared
+
     def run(
-        self, fn: Callable[[T], R], tasks: Sequence[T]
+        self,
+        fn: Callable[..., R],
+        tasks: Sequence[T],
+        *,
+        retry: Callable[[T], Sequence[T]] | None = None,
     ) -> Iterator[tuple[T, R | BaseException]]:
-        """Yield ``(task, outcome)`` for each task in order."""
+        """Yield ``(task, outcome)`` for each task in order (a crash here ends the caller)."""
         for task in tasks:
             try:
-                outcome: R | BaseException = fn(task)
+                if self._shared is _NO_SHARED:
+                    outcome: R | BaseException = fn(task)
+                else:
+                    outcome = fn(task, self._shared)
             except Exception as exc:
                 outcome = exc
             yield task, outcome
@@ -78,13 +124,48 @@ class InlineExecutor:
         """Nothing to release."""
 
 
+# --------------------------------------------------------------------------- local pool
+
+_WORKER_SHARED: list[object] = []
+
+
+def _watch_parent(parent: Connection) -> None:
+    """Exit this worker at once when the process that started the pool is gone."""
+    with contextlib.suppress(EOFError, OSError):
+        parent.recv()  # nothing is ever sent: returns (EOFError) when the parent's end closes
+    os._exit(1)
+
+
+def _die_with_parent() -> None:
+    """Ask Linux to kill this process when its parent (the fork server) dies."""
+    if not sys.platform.startswith("linux"):
+        return
+    with contextlib.suppress(OSError, AttributeError):
+        import ctypes
+        import signal
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        pr_set_pdeathsig = 1
+        libc.prctl(pr_set_pdeathsig, signal.SIGKILL, 0, 0, 0)
+
+
+def _init_worker(parent: Connection, shared: object) -> None:
+    _die_with_parent()
+    threading.Thread(target=_watch_parent, args=(parent,), daemon=True).start()
+    _WORKER_SHARED[:] = [shared]
+
+
+def _call_shared(fn: Callable[[T, object], R], task: T) -> R:
+    return fn(task, _WORKER_SHARED[0])
+
+
 class ProcessExecutor:
     """
     A local pool of worker processes (:class:`~concurrent.futures.ProcessPoolExecutor`).
 
     Workers are started by a fork server that has imported ``preload`` once, so each starts
     fast without inheriting the parent's threads; where there is no fork server (Windows,
-    macOS defaults) they are spawned.
+    macOS defaults) they are spawned. Each worker exits as soon as this process is gone.
 
     Parameters
     ----------
@@ -92,9 +173,13 @@ class ProcessExecutor:
         Number of worker processes.
     preload
         Modules the fork server imports before forking workers.
+    shared
+        An object every task receives as its second argument, sent to each worker once.
     """
 
-    def __init__(self, workers: int, *, preload: Sequence[str] = ()) -> None:
+    def __init__(
+        self, workers: int, *, preload: Sequence[str] = (), shared: object = _NO_SHARED
+    ) -> None:
         ctx: BaseContext
         if "forkserver" in multiprocessing.get_all_start_methods():
             server = multiprocessing.get_context("forkserver")
@@ -102,15 +187,69 @@ class ProcessExecutor:
             ctx = server
         else:
             ctx = multiprocessing.get_context("spawn")
+        self._ctx = ctx
+        self._shared = shared
         self.slots = workers
         self.description = f"{workers} processes"
-        self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+        # the worker ends of a pipe whose parent end only this process holds: when this
+        # process dies, however, the workers read end-of-file and exit
+        self._from_parent, self._parent_end = ctx.Pipe(duplex=False)
+        self._pool = self._new_pool()
+
+    def _new_pool(self) -> ProcessPoolExecutor:
+        shared = None if self._shared is _NO_SHARED else self._shared
+        return ProcessPoolExecutor(
+            max_workers=self.slots,
+            mp_context=self._ctx,
+            initializer=_init_worker,
+            initargs=(self._from_parent, shared),
+        )
+
+    def _submit(self, fn: Callable[..., R], task: T) -> Future[R]:
+        if self._shared is _NO_SHARED:
+            return self._pool.submit(fn, task)
+        return self._pool.submit(_call_shared, fn, task)
 
     def run(
-        self, fn: Callable[[T], R], tasks: Sequence[T]
+        self,
+        fn: Callable[..., R],
+        tasks: Sequence[T],
+        *,
+        retry: Callable[[T], Sequence[T]] | None = None,
     ) -> Iterator[tuple[T, R | BaseException]]:
-        """Submit every task; yield each with its outcome as it completes."""
-        futures: dict[Future[R], T] = {self._pool.submit(fn, task): task for task in tasks}
+        """
+        Submit every task; yield each with its outcome as it completes.
+
+        Tasks lost with a dead worker are run once more in a fresh pool, after the others:
+        ``retry(task)`` gives what to run instead (default: the task itself; an empty list
+        when nothing of it is left to do).
+        """
+        lost: list[T] = []
+        for task, outcome in self._round(fn, tasks):
+            if isinstance(outcome, BrokenProcessPool):
+                lost.append(task)
+            else:
+                yield task, outcome
+        if not lost:
+            return
+        self._pool.shutdown(wait=True, cancel_futures=True)
+        self._pool = self._new_pool()
+        again = [t for task in lost for t in (retry(task) if retry else [task])]
+        for task, outcome in self._round(fn, again):
+            if isinstance(outcome, BrokenProcessPool):
+                msg = f"the worker process died twice running this task ({outcome})"
+                outcome = WorkerLostError(msg)
+            yield task, outcome
+
+    def _round(
+        self, fn: Callable[..., R], tasks: Sequence[T]
+    ) -> Iterator[tuple[T, R | BaseException]]:
+        futures: dict[Future[R], T] = {}
+        for task in tasks:
+            try:
+                futures[self._submit(fn, task)] = task
+            except BrokenProcessPool as exc:  # the pool broke while submitting
+                yield task, exc
         for future in as_completed(futures):
             outcome: R | BaseException = _outcome(future)
             yield futures[future], outcome
@@ -118,6 +257,8 @@ class ProcessExecutor:
     def close(self) -> None:
         """Cancel pending tasks and stop the workers."""
         self._pool.shutdown(wait=True, cancel_futures=True)
+        self._parent_end.close()
+        self._from_parent.close()
 
 
 def _outcome(future: Future[R]) -> R | BaseException:
@@ -128,9 +269,12 @@ def _outcome(future: Future[R]) -> R | BaseException:
     return result
 
 
+# --------------------------------------------------------------------------- Dask
+
+
 class DaskExecutor:
     """
-    Tasks on an existing ``dask.distributed`` cluster.
+    Tasks on a ``dask.distributed`` cluster: an existing scheduler, or a client given.
 
     Workers must see the same files as this process (inputs, network, output folder) and
     have this package installed.
@@ -138,9 +282,14 @@ class DaskExecutor:
     Parameters
     ----------
     address
-        The scheduler, e.g. ``tcp://10.0.0.5:8786``.
+        The scheduler, e.g. ``tcp://10.0.0.5:8786`` (ignored with ``client``).
+    client
+        A connected ``distributed.Client`` to use (left open at :meth:`close`).
     timeout_s
         How long to wait for the connection.
+    shared
+        An object every task receives as its second argument (scattered to every worker
+        once).
 
     Raises
     ------
@@ -148,35 +297,82 @@ class DaskExecutor:
         The scheduler cannot be reached or has no workers, or ``dask.distributed`` is missing.
     """
 
-    def __init__(self, address: str, *, timeout_s: float = 30.0) -> None:
+    def __init__(
+        self,
+        address: str | None = None,
+        *,
+        client: Any = None,
+        timeout_s: float = 30.0,
+        shared: object = _NO_SHARED,
+    ) -> None:
         try:
             from distributed import Client
         except ImportError as exc:  # pragma: no cover - a dependency of the package
-            msg = "--scheduler needs dask.distributed; pip install 'dask[distributed]'"
+            msg = "Dask needs dask.distributed; pip install 'dask[distributed]'"
             raise SchedulerError(msg) from exc
-        try:
-            self._client = Client(  # type: ignore[no-untyped-call]
-                address, timeout=timeout_s, set_as_default=False
-            )
-        except (OSError, TimeoutError, ValueError) as exc:
-            msg = f"cannot reach the Dask scheduler at {address!r}: {exc}; is it running?"
-            raise SchedulerError(msg) from exc
-        workers = self._client.scheduler_info().get("workers", {})
+        self._own = client is None
+        if client is None:
+            try:
+                client = Client(  # type: ignore[no-untyped-call]
+                    address, timeout=timeout_s, set_as_default=False
+                )
+            except (OSError, TimeoutError, ValueError) as exc:
+                msg = f"cannot reach the Dask scheduler at {address!r}: {exc}; is it running?"
+                raise SchedulerError(msg) from exc
+        self._client = client
+        address = str(client.scheduler.address)
+        workers = client.scheduler_info().get("workers", {})
         threads = sum(int(w.get("nthreads", 1)) for w in workers.values())
         if threads < 1:
-            self._client.close()  # type: ignore[no-untyped-call]
+            self.close()
             msg = f"the Dask scheduler at {address!r} has no workers; start some first"
             raise SchedulerError(msg)
         self.slots = threads
         self.description = f"dask {address} ({len(workers)} workers, {threads} threads)"
+        self._shared: object = _NO_SHARED
+        if shared is not _NO_SHARED:
+            self._shared = client.scatter(shared, broadcast=True, hash=False)
+
+    def _submit(self, fn: Callable[..., R], task: T) -> Any:
+        if self._shared is _NO_SHARED:
+            return self._client.submit(fn, task, pure=False)
+        return self._client.submit(fn, task, self._shared, pure=False)
 
     def run(
-        self, fn: Callable[[T], R], tasks: Sequence[T]
+        self,
+        fn: Callable[..., R],
+        tasks: Sequence[T],
+        *,
+        retry: Callable[[T], Sequence[T]] | None = None,
     ) -> Iterator[tuple[T, R | BaseException]]:
-        """Submit every task to the cluster; yield each with its outcome as it completes."""
+        """
+        Submit every task to the cluster; yield each with its outcome as it completes.
+
+        A task whose workers kept dying (Dask's ``KilledWorker``) is submitted once more
+        (``retry`` as for :meth:`ProcessExecutor.run`).
+        """
+        from distributed import KilledWorker
+
+        lost: list[T] = []
+        for task, outcome in self._round(fn, tasks):
+            if isinstance(outcome, KilledWorker):
+                lost.append(task)
+            else:
+                yield task, outcome
+        again = [t for task in lost for t in (retry(task) if retry else [task])]
+        for task, outcome in self._round(fn, again):
+            if isinstance(outcome, KilledWorker):
+                outcome = WorkerLostError(f"the Dask workers running this task died ({outcome})")
+            yield task, outcome
+
+    def _round(
+        self, fn: Callable[..., R], tasks: Sequence[T]
+    ) -> Iterator[tuple[T, R | BaseException]]:
         from distributed import as_completed as dask_as_completed
 
-        futures = {self._client.submit(fn, task, pure=False): task for task in tasks}
+        if not tasks:
+            return
+        futures = {self._submit(fn, task): task for task in tasks}
         for future in dask_as_completed(  # type: ignore[no-untyped-call]
             list(futures), loop=self._client.loop
         ):
@@ -187,35 +383,43 @@ class DaskExecutor:
             yield futures[future], outcome
 
     def close(self) -> None:
-        """Close the connection (the cluster keeps running)."""
-        self._client.close()  # type: ignore[no-untyped-call]
+        """Close the connection we opened (the cluster keeps running; a given client stays)."""
+        if self._own:
+            self._client.close()
 
 
 def make_executor(
     workers: int | None,
     scheduler: str | None,
     *,
+    client: Any = None,
     preload: Sequence[str] = (),
     timeout_s: float = 30.0,
+    shared: object = _NO_SHARED,
 ) -> InlineExecutor | ProcessExecutor | DaskExecutor:
     """
-    The executor for the command line's ``--workers`` / ``--scheduler``.
+    The executor for the command line's ``--workers`` / ``--scheduler`` (or a Dask client).
 
     Parameters
     ----------
     workers
         Local worker processes; ``None`` means one per core; 1 runs in this process.
-        Ignored with ``scheduler``.
+        Ignored with ``scheduler`` or ``client``.
     scheduler
         Address of a Dask scheduler, or ``None`` for local execution.
+    client
+        A connected ``distributed.Client`` (instead of ``scheduler``).
     preload
         Modules the local fork server imports once.
     timeout_s
         How long to try to connect to ``scheduler``.
+    shared
+        An object every task receives as its second argument (``fn(task, shared)``), sent
+        to each worker once.
     """
-    if scheduler:
-        return DaskExecutor(scheduler, timeout_s=timeout_s)
-    count = workers if workers is not None else (os.cpu_count() or 1)
+    if client is not None or scheduler:
+        return DaskExecutor(scheduler, client=client, timeout_s=timeout_s, shared=shared)
+    count = workers if workers is not None else available_cores()
     if count <= 1:
-        return InlineExecutor()
-    return ProcessExecutor(count, preload=preload)
+        return InlineExecutor(shared=shared)
+    return ProcessExecutor(count, preload=preload, shared=shared)

@@ -8,6 +8,13 @@ Per trace, in the output folder:
 ``csv`` / ``parquet``
     ``<name>.csv|parquet``: the per-point table of :func:`mapmatch.export.points_frame`, and
     ``<name>.edges.csv|parquet``: one row per matched edge (:func:`mapmatch.export.edges_frame`).
+    CSV times are ISO 8601 UTC, Parquet keeps the dtypes (``Int64`` ids, UTC datetimes).
+``geoparquet``
+    The same two tables with geometries (snapped Points, driven LineStrings) and GeoParquet
+    metadata, plus ``<name>.segments.parquet`` (one LineString per segment); read them with
+    ``geopandas.read_parquet``.
+``gpkg``
+    ``<name>.gpkg``: one GeoPackage with the layers ``segments``, ``edges`` and ``points``.
 
 Every file is written to a hidden temporary file in the same folder and renamed into place
 (``os.replace``), so a file under its final name is always complete. The sidecar is renamed
@@ -29,6 +36,7 @@ import math
 import os
 import tempfile
 from dataclasses import asdict, dataclass, fields
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -37,6 +45,7 @@ from mapmatch import export
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable
 
+    from mapmatch.export import GeoKind
     from mapmatch.result import MatchResult
 
 __all__ = [
@@ -55,7 +64,19 @@ __all__ = [
 ]
 
 #: Output formats of a batch.
-FORMATS = ("geojson", "csv", "parquet")
+FORMATS = ("geojson", "csv", "parquet", "geoparquet", "gpkg")
+#: What the files of a format hold, main file (the points) last: (name suffix, kind).
+_FILES: dict[str, tuple[tuple[str, GeoKind | None], ...]] = {
+    "geojson": ((".geojson", None),),
+    "csv": ((".edges.csv", "edges"), (".csv", "points")),
+    "parquet": ((".edges.parquet", "edges"), (".parquet", "points")),
+    "geoparquet": (
+        (".segments.parquet", "segments"),
+        (".edges.parquet", "edges"),
+        (".parquet", "points"),
+    ),
+    "gpkg": ((".gpkg", None),),
+}
 #: File name of the per-trace summary in the output folder.
 SUMMARY_NAME = "summary.csv"
 _TMP_PREFIX = ".tmp-"
@@ -245,15 +266,17 @@ def output_paths(out_dir: Path, name: str, fmt: str) -> tuple[Path, ...]:
     --------
     >>> [p.name for p in output_paths(Path("out"), "bus-1", "csv")]
     ['bus-1.edges.csv', 'bus-1.csv']
+    >>> [p.name for p in output_paths(Path("out"), "bus-1", "geoparquet")]
+    ['bus-1.segments.parquet', 'bus-1.edges.parquet', 'bus-1.parquet']
     >>> [p.name for p in output_paths(Path("out"), "bus-1", "geojson")]
     ['bus-1.geojson']
     """
-    if fmt == "geojson":
-        return (out_dir / f"{name}.geojson",)
-    if fmt in ("csv", "parquet"):
-        return (out_dir / f"{name}.edges.{fmt}", out_dir / f"{name}.{fmt}")
-    msg = f"unknown output format {fmt!r}; use one of {', '.join(FORMATS)}"
-    raise ValueError(msg)
+    try:
+        files = _FILES[fmt]
+    except KeyError:
+        msg = f"unknown output format {fmt!r}; use one of {', '.join(FORMATS)}"
+        raise ValueError(msg) from None
+    return tuple(out_dir / f"{name}{suffix}" for suffix, _ in files)
 
 
 def outputs_complete(out_dir: Path, name: str, fmt: str) -> bool:
@@ -272,7 +295,9 @@ def atomic_write(path: Path, write: Callable[[Path], object]) -> None:
     write
         Called with the temporary path; must create that file.
     """
-    fd, tmp_name = tempfile.mkstemp(prefix=f"{_TMP_PREFIX}{path.name}.", dir=path.parent)
+    fd, tmp_name = tempfile.mkstemp(
+        prefix=f"{_TMP_PREFIX}{path.name}.", suffix=path.suffix, dir=path.parent
+    )
     os.close(fd)
     tmp = Path(tmp_name)
     try:
@@ -296,7 +321,7 @@ def remove_temporaries(out_dir: Path) -> int:
 
 def write_result(result: MatchResult, out_dir: Path, name: str, fmt: str) -> None:
     """
-    Write one trace's outputs atomically (sidecar first, main file last).
+    Write one trace's outputs atomically (sidecars first, main file last).
 
     Parameters
     ----------
@@ -307,21 +332,19 @@ def write_result(result: MatchResult, out_dir: Path, name: str, fmt: str) -> Non
     name
         Output name without suffix (from :func:`~mapmatch.batch.inputs.assign_output_names`).
     fmt
-        ``geojson``, ``csv`` or ``parquet``.
+        One of :data:`FORMATS`.
     """
     paths = output_paths(out_dir, name, fmt)
     if fmt == "geojson":
         data = export.geojson_bytes(result) + b"\n"
         atomic_write(paths[0], lambda tmp: tmp.write_bytes(data))
         return
-    edges = export.edges_frame(result)
-    points = export.points_frame(result)
-    if fmt == "csv":
-        atomic_write(paths[0], lambda tmp: edges.to_csv(tmp, index=False))
-        atomic_write(paths[1], lambda tmp: points.to_csv(tmp, index=False))
-    else:
-        atomic_write(paths[0], lambda tmp: edges.to_parquet(tmp, index=False))
-        atomic_write(paths[1], lambda tmp: points.to_parquet(tmp, index=False))
+    if fmt == "gpkg":
+        atomic_write(paths[0], lambda tmp: export.write_geopackage(result, tmp))
+        return
+    for path, (_, kind) in zip(paths, _FILES[fmt], strict=True):
+        assert kind is not None
+        atomic_write(path, partial(export.write_table, result, kind, fmt=fmt))
 
 
 def _row_line(row: SummaryRow) -> str:

@@ -84,8 +84,10 @@ def add_parser(subparsers: argparse._SubParsersAction[Any]) -> argparse.Argument
         "--format",
         choices=FORMATS,
         default="geojson",
-        help="geojson (DESIGN.md schema), or csv/parquet: per-point table plus "
-        "<id>.edges.csv|parquet (default geojson)",
+        help="geojson (one FeatureCollection per trace); csv/parquet: per-point table plus "
+        "<id>.edges.csv|parquet; geoparquet: the same with geometries plus "
+        "<id>.segments.parquet (geopandas.read_parquet); gpkg: one GeoPackage per trace with "
+        "layers segments, edges, points (default geojson)",
     )
     where = p.add_mutually_exclusive_group()
     where.add_argument(
