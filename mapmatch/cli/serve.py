@@ -40,13 +40,15 @@ def _port(text: str) -> int:
 
 
 def _workers(text: str) -> int:
-    """A worker count >= 1."""
+    """A worker count >= 1, or ``auto``: one per core this process may run on."""
+    if text.strip().lower() == "auto":
+        return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1)
     try:
         count = int(text)
     except ValueError:
         count = 0
     if count < 1:
-        msg = f"must be a whole number >= 1 (got {text!r})"
+        msg = f"must be a whole number >= 1 or 'auto' (got {text!r})"
         raise argparse.ArgumentTypeError(msg)
     return count
 
@@ -75,7 +77,12 @@ def add_parser(sub: Any) -> None:
     parser.add_argument("--host", default="127.0.0.1", help="bind address (default 127.0.0.1)")
     parser.add_argument("--port", type=_port, default=8000, help="TCP port (default 8000)")
     parser.add_argument(
-        "--workers", type=_workers, default=1, help="worker processes (default 1)", metavar="N"
+        "--workers",
+        type=_workers,
+        default=1,
+        metavar="N",
+        help="worker processes, or 'auto' for one per core (default 1); matching holds the "
+        "GIL, so processes, not threads, use more cores",
     )
     parser.add_argument("--cache-dir", default=None, help="folder of compiled networks")
     parser.add_argument(
