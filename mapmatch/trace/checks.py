@@ -12,6 +12,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any, Final, cast
 
 import numpy as np
+import numpy.typing as npt
 import pandas as pd
 
 from mapmatch.errors import InvalidTraceError
@@ -30,11 +31,15 @@ __all__ = [
     "check_lengths",
     "check_odometer",
     "checked_column",
+    "plain_numbers",
     "within",
 ]
 
 SHOW: Final = 5
 """Offending rows quoted in a message."""
+
+_LAT: Final = column("lat")
+_LON: Final = column("lon")
 
 
 class Checker:
@@ -62,7 +67,7 @@ class Checker:
         field: str,
         problem: str,
         rows: IntArray,
-        raw: pd.Series[Any] | FloatArray,
+        raw: pd.Series[Any] | npt.NDArray[Any],
         fix: str,
     ) -> InvalidTraceError:
         """The error for ``rows`` of ``field``: the problem, the values in ``raw``, a fix."""
@@ -75,7 +80,18 @@ class Checker:
         return InvalidTraceError(msg, trace_id=self.tid, field=field, rows=rows.tolist())
 
     def numeric(self, values: object, field: str) -> FloatArray:
-        """Float64 values; blanks become NaN, text that is not a number is an error."""
+        """
+        Float64 values; blanks become NaN, text that is not a number is an error.
+
+        A numpy array of numbers is taken as it is (no pandas, no copy when it is float64:
+        validation never writes into it); anything else goes through a pandas Series.
+        """
+        arr = plain_numbers(values)
+        if arr is not None:
+            if arr.dtype.kind == "b":
+                bad = np.arange(arr.size, dtype=np.int64)
+                raise self.fail(field, "is boolean, not a number", bad, arr, "give numbers")
+            return arr.astype(np.float64, copy=False)
         s = as_series(values)
         if pd.api.types.is_bool_dtype(s.dtype):
             bad = np.arange(len(s), dtype=np.int64)
@@ -95,6 +111,8 @@ class Checker:
 
     def rule(self, values: FloatArray, field: str, broken: BoolArray, rule: str) -> None:
         """Raise naming the ``broken`` rows of ``field`` and the ``rule`` they break."""
+        if not broken.any():
+            return
         bad = np.flatnonzero(broken)
         if bad.size:
             raise self.fail(
@@ -107,6 +125,8 @@ class Checker:
 
     def coordinates(self, lon: FloatArray, lat: FloatArray) -> None:
         """Every row has a finite position within the declared bounds (swapped lon/lat told)."""
+        if within(lat, _LAT).all() and within(lon, _LON).all():  # NaN and inf keep no bound
+            return
         for field, values in (("lat", lat), ("lon", lon)):
             bad = np.flatnonzero(~np.isfinite(values))
             if bad.size:
@@ -117,18 +137,17 @@ class Checker:
                     values,
                     f"every row needs a {field} in degrees; fix or drop those rows",
                 )
-        lat_col = column("lat")
-        outside = ~within(lat, lat_col)
-        if np.all(outside) and np.all(within(lon, lat_col)):
+        outside = ~within(lat, _LAT)
+        if np.all(outside) and np.all(within(lon, _LAT)):
             bad = np.flatnonzero(outside)
             raise self.fail(
                 field="lat",
-                problem=f"is out of range [{lat_col.ge:g}, {lat_col.le:g}]",
+                problem=f"is out of range [{_LAT.ge:g}, {_LAT.le:g}]",
                 rows=bad,
                 raw=lat,
                 fix="every lat looks like a longitude: swapped lon/lat? swap the two columns",
             )
-        for values, col in ((lat, column("lat")), (lon, column("lon"))):
+        for values, col in ((lat, _LAT), (lon, _LON)):
             bad = np.flatnonzero(~within(values, col))
             if bad.size:
                 raise self.fail(
@@ -154,24 +173,29 @@ def checked_column(chk: Checker, col: Column, values: object) -> FloatArray:
         out[out >= col.wraps] = 0.0  # np.mod(-1e-15, 360) rounds to 360.0
         return out
     if col.bounded:
-        unit = f" {col.unit}" if col.unit else ""
-        broken = ~within(out, col) & ~np.isnan(out)
-        chk.rule(out, col.name, broken, f"must be {col.rule()}{unit}")
+        kept = within(out, col) | np.isnan(out)
+        if not kept.all():
+            unit = f" {col.unit}" if col.unit else ""
+            chk.rule(out, col.name, ~kept, f"must be {col.rule()}{unit}")
     chk.rule(out, col.name, np.isinf(out), "must be finite (NaN = unknown)")
     return out
 
 
 def within(values: FloatArray, col: Column) -> BoolArray:
     """Whether each value keeps the column's bounds (NaN keeps none)."""
-    ok = np.ones(values.shape, dtype=bool)
-    with np.errstate(invalid="ignore"):
-        if col.gt is not None:
-            ok &= values > col.gt
-        if col.ge is not None:
-            ok &= values >= col.ge
-        if col.le is not None:
-            ok &= values <= col.le
-    return ok
+    ok: BoolArray | None = None
+    for bound, keeps in ((col.gt, np.greater), (col.ge, np.greater_equal), (col.le, np.less_equal)):
+        if bound is not None:
+            kept = keeps(values, bound)
+            ok = kept if ok is None else ok & kept
+    return np.ones(values.shape, dtype=bool) if ok is None else ok
+
+
+def plain_numbers(values: object) -> npt.NDArray[Any] | None:
+    """``values`` when it is a 1-D numpy array of numbers or booleans (no pandas needed)."""
+    if type(values) is np.ndarray and values.ndim == 1 and values.dtype.kind in "biuf":
+        return values
+    return None
 
 
 def _fmt(value: object) -> str:
@@ -190,7 +214,8 @@ def check_lengths(given: Mapping[str, object], tid: str) -> int:
     """The number of points: every given column 1-D with one value per point, 2 or more."""
     lengths: dict[str, int] = {}
     for field, values in given.items():
-        if isinstance(values, str | bytes) or np.ndim(values) != 1:  # type: ignore[arg-type]
+        ndim = values.ndim if isinstance(values, np.ndarray) else np.ndim(values)  # type: ignore[arg-type]
+        if isinstance(values, str | bytes) or ndim != 1:
             msg = (
                 f"trace {tid!r}: {field!r} must be a 1-D sequence with one value per point "
                 f"(got {type(values).__name__})"

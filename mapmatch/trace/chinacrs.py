@@ -47,7 +47,8 @@ import numpy as np
 if TYPE_CHECKING:
     import numpy.typing as npt
 
-    FloatArray = npt.NDArray[np.float64]
+    from mapmatch.types import BoolArray, FloatArray
+
     ArrayLike = npt.ArrayLike
 
 __all__ = [
@@ -76,7 +77,7 @@ def _as_arrays(lon: ArrayLike, lat: ArrayLike) -> tuple[FloatArray, FloatArray]:
     return lon_a.astype(np.float64, copy=True), lat_a.astype(np.float64, copy=True)
 
 
-def in_china(lon: ArrayLike, lat: ArrayLike) -> npt.NDArray[np.bool_]:
+def in_china(lon: ArrayLike, lat: ArrayLike) -> BoolArray:
     """
     Whether points fall inside the rectangle where the Chinese offsets apply.
 

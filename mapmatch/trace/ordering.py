@@ -12,7 +12,6 @@ from bisect import bisect_right
 from typing import TYPE_CHECKING, Final
 
 import numpy as np
-import pandas as pd
 
 if TYPE_CHECKING:
     from mapmatch.trace.checks import Checker
@@ -63,7 +62,7 @@ def time_order(
 ) -> tuple[IntArray, int]:
     """The stable time order of the rows (file order without times) and how many moved."""
     n = time_s.size
-    steps = np.diff(time_s)
+    steps = time_s[1:] - time_s[:-1]
     if not timed or np.all(steps >= 0):
         return np.arange(n, dtype=np.int64), 0
     order = np.argsort(time_s, kind="stable").astype(np.int64)
@@ -98,9 +97,11 @@ def true_duplicates(matrix: FloatArray, *, timed: bool) -> BoolArray:
         shared[1:] = t[1:] == t[:-1]
         shared[:-1] |= shared[1:]
         dup = np.zeros(len(t), dtype=bool)
-        rows = np.flatnonzero(shared)
-        if rows.size:
-            dup[rows] = pd.DataFrame(matrix[rows]).duplicated(keep="first").to_numpy()
+        seen: set[tuple[float | None, ...]] = set()
+        for row in np.flatnonzero(shared).tolist():
+            key = tuple(None if v != v else v for v in matrix[row].tolist())  # NaN equals NaN
+            dup[row] = key in seen
+            seen.add(key)
         return dup
     a, b = matrix[1:], matrix[:-1]
     same = ((a == b) | (np.isnan(a) & np.isnan(b))).all(axis=1)
@@ -120,10 +121,10 @@ def step_m(lon: FloatArray, lat: FloatArray) -> FloatArray:
     803.5
     """
     rad = np.pi / 180.0
-    dlon = (np.diff(lon) + 180.0) % 360.0 - 180.0  # the short way across the antimeridian
+    dlon = (lon[1:] - lon[:-1] + 180.0) % 360.0 - 180.0  # the short way across the antimeridian
     mid = (lat[1:] + lat[:-1]) * (0.5 * rad)
     return np.asarray(
-        _EARTH_RADIUS_M * rad * np.hypot(dlon * np.cos(mid), np.diff(lat)), dtype=np.float64
+        _EARTH_RADIUS_M * rad * np.hypot(dlon * np.cos(mid), lat[1:] - lat[:-1]), dtype=np.float64
     )
 
 
@@ -140,17 +141,17 @@ def implausible_times(time_s: FloatArray, lon: FloatArray, lat: FloatArray) -> s
     True
     """
     step = step_m(lon, lat)
-    dt = np.diff(time_s)
+    dt = time_s[1:] - time_s[:-1]
     moving = step >= MOVING_STEP_M
-    with np.errstate(divide="ignore", invalid="ignore"):
-        speed = np.where(dt > 0, step / np.where(dt > 0, dt, 1.0), np.inf)
+    elapsed = dt > 0
+    speed = np.divide(step, dt, out=np.full(step.shape, np.inf), where=elapsed)  # inf: no time
     impossible = moving & (speed > MAX_PLAUSIBLE_SPEED_MPS)
-    n_moving, n_bad = int(moving.sum()), int(impossible.sum())
+    n_moving, n_bad = int(np.count_nonzero(moving)), int(np.count_nonzero(impossible))
     if n_moving == 0 or n_bad < IMPLAUSIBLE_SHARE * n_moving:
         return None
     timed_speeds = speed[moving & np.isfinite(speed)]
     median = f"; median {np.median(timed_speeds):.3g} m/s" if timed_speeds.size else ""
-    no_time = int((moving & ~(dt > 0)).sum())
+    no_time = int(np.count_nonzero(moving & ~elapsed))
     return (
         f"the times cannot be right: {n_bad} of {n_moving} moving steps imply more than "
         f"{MAX_PLAUSIBLE_SPEED_MPS:g} m/s ({no_time} with no time between two positions"
@@ -159,15 +160,21 @@ def implausible_times(time_s: FloatArray, lon: FloatArray, lat: FloatArray) -> s
 
 
 def merge_duplicates(
-    matrix: FloatArray, order: IntArray, *, timed: bool, chk: Checker, warnings: list[str]
+    columns: list[FloatArray], order: IntArray, *, timed: bool, chk: Checker, warnings: list[str]
 ) -> tuple[IntArray, IntArray]:
     """
     Merge true duplicates: the rows to keep (in time order) and the merged input rows (sorted).
 
-    ``matrix`` holds every column of the rows in time ``order`` (time first when ``timed``).
-    A trace is never merged below 2 points: two identical fixes stay a trace.
+    ``columns`` are every column of the input rows (the times first when ``timed``), to be
+    taken in time ``order``. A trace is never merged below 2 points: two identical fixes
+    stay a trace.
     """
     n = order.size
+    if timed:
+        t = columns[0][order]
+        if not (t[1:] == t[:-1]).any():  # no shared time: no row can repeat another
+            return order, order[:0]
+    matrix = np.column_stack([c[order] for c in columns])
     dup = true_duplicates(matrix, timed=timed)
     if dup.sum() > n - 2:  # never below 2 points: two identical fixes stay a trace
         dup[np.flatnonzero(dup)[0]] = False
@@ -188,7 +195,8 @@ def merge_duplicates(
 
 def shared_times(time_s: FloatArray, kept: IntArray, chk: Checker, warnings: list[str]) -> int:
     """Points kept whose time equals the previous point's (``time_s`` of the input rows)."""
-    zero = np.flatnonzero(np.diff(time_s[kept]) == 0) + 1
+    t = time_s[kept]
+    zero = np.flatnonzero(t[1:] == t[:-1]) + 1
     shared = int(zero.size)
     if shared:
         warnings.append(

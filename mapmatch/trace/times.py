@@ -13,14 +13,15 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
+import numpy.typing as npt
 import pandas as pd
 
 from mapmatch.errors import InvalidTraceError
-from mapmatch.trace.checks import Checker, as_series
+from mapmatch.trace.checks import Checker, as_series, plain_numbers
 from mapmatch.trace.report import in_source
 
 if TYPE_CHECKING:
-    from mapmatch.types import FloatArray
+    from mapmatch.types import BoolArray, FloatArray
 
 __all__ = ["epoch_seconds", "parse_time", "per_second", "unit_note"]
 
@@ -53,24 +54,69 @@ def parse_time(values: object, n: int, chk: Checker) -> tuple[FloatArray, str]:
     """
     if values is None:
         return np.full(n, np.nan), "none"
+    arr = plain_numbers(values)
+    if arr is not None:  # a numpy array of numbers: no pandas
+        if arr.dtype.kind == "b":
+            raise chk.fail(_TIME, "is missing or not a time", np.arange(n), arr, _TIME_FIX)
+        out = arr.astype(np.float64, copy=False)
+        blank = np.isnan(out)
+        out, unit = epoch_seconds(out, chk)
+        _check_float_precision(arr.dtype, out, unit, chk)
+        return _finished(out, blank, unit, arr, chk)
+    if type(values) is np.ndarray and values.dtype.kind == "M":
+        out = _datetime64_to_epoch_s(values)
+        return _finished(out, np.isnan(out), "datetime", values, chk)
+    return _parse_with_pandas(values, n, chk)
+
+
+def _finished(
+    out: FloatArray,
+    blank: BoolArray,
+    unit: str,
+    raw: pd.Series[Any] | npt.NDArray[Any],
+    chk: Checker,
+) -> tuple[FloatArray, str]:
+    """The times, or ``"none"`` when all are blank; a blank or non-finite one is an error."""
+    if blank.all():
+        return np.full(out.size, np.nan), "none"
+    bad = np.flatnonzero(~np.isfinite(out))
+    if bad.size:
+        raise chk.fail(_TIME, "is missing or not a time", bad, raw, _TIME_FIX)
+    return out, unit
+
+
+def _datetime64_to_epoch_s(values: npt.NDArray[np.datetime64]) -> FloatArray:
+    """
+    Naive ``datetime64`` (UTC) to epoch seconds; NaT becomes NaN.
+
+    Examples
+    --------
+    >>> _datetime64_to_epoch_s(np.array(["2024-05-01T08:00:00.5", "NaT"], dtype="M8[ms]"))
+    array([1.7145504e+09,           nan])
+    """
+    out = np.asarray((values - np.datetime64(0, "s")) / np.timedelta64(1, "s"), dtype=np.float64)
+    out[np.isnat(values)] = np.nan
+    return out
+
+
+def _parse_with_pandas(values: object, n: int, chk: Checker) -> tuple[FloatArray, str]:
+    """:func:`parse_time` of anything but a numpy array: lists, Series, text, Timestamps."""
     s = as_series(values)
-    epoch = pd.Timestamp(0, tz="UTC")
-    one_s = pd.Timedelta(1, "s")
-    raw: pd.Series[Any] | FloatArray = s
+    raw: pd.Series[Any] | npt.NDArray[Any] = s
     if pd.api.types.is_bool_dtype(s.dtype):
         rows = np.arange(n, dtype=np.int64)
         raise chk.fail(_TIME, "is missing or not a time", rows, s, _TIME_FIX)
     if pd.api.types.is_datetime64_any_dtype(s.dtype):
         dti = pd.DatetimeIndex(s)
-        dti = dti.tz_localize("UTC") if dti.tz is None else dti.tz_convert("UTC")
-        out = np.asarray(((dti - epoch) / one_s).to_numpy(na_value=np.nan), dtype=np.float64)
+        naive_utc = dti if dti.tz is None else dti.tz_convert("UTC").tz_localize(None)
+        out = _datetime64_to_epoch_s(naive_utc.to_numpy())  # in its own unit: no overflow
         blank = np.isnan(out)
         unit = "datetime"
     elif pd.api.types.is_numeric_dtype(s.dtype):
         out = np.asarray(s.to_numpy(dtype=np.float64, na_value=np.nan), dtype=np.float64)
         blank = np.isnan(out)
         out, unit = epoch_seconds(out, chk)
-        _check_float_precision(s, out, unit, chk)
+        _check_float_precision(s.dtype, out, unit, chk)
     else:
         text = s.where(s.isna(), s.astype("string").str.strip())
         blank = s.isna().to_numpy() | (text == "").fillna(True).to_numpy()
@@ -84,12 +130,7 @@ def parse_time(values: object, n: int, chk: Checker) -> tuple[FloatArray, str]:
             out = out.copy()
             out[iso] = _iso_to_epoch_s(s[iso])
             unit = "iso" if np.isnan(num).all() else "mixed"
-    if blank.all():
-        return np.full(n, np.nan), "none"
-    bad = np.flatnonzero(~np.isfinite(out))
-    if bad.size:
-        raise chk.fail(_TIME, "is missing or not a time", bad, raw, _TIME_FIX)
-    return out, unit
+    return _finished(out, blank, unit, raw, chk)
 
 
 def per_second(unit: str) -> float:
@@ -112,6 +153,8 @@ def epoch_seconds(values: FloatArray, chk: Checker) -> tuple[FloatArray, str]:
     (array([0. , 1.5]), 's')
     """
     finite = np.isfinite(values)
+    if finite.all() and np.abs(values).max(initial=0.0) < _UNIT_BOUNDS[0]:
+        return values, "s"  # the usual case, decided without sorting into bands
     band = np.searchsorted(np.asarray(_UNIT_BOUNDS), np.abs(values), side="right")
     band[~finite] = -1
     present = np.unique(band[finite]).tolist()
@@ -144,9 +187,11 @@ def epoch_seconds(values: FloatArray, chk: Checker) -> tuple[FloatArray, str]:
     return np.asarray(out, dtype=np.float64), unit
 
 
-def _check_float_precision(s: pd.Series[Any], time_s: FloatArray, unit: str, chk: Checker) -> None:
-    """Refuse float32/float16 times too coarse to tell fixes apart."""
-    kind = str(s.dtype).lower()
+def _check_float_precision(dtype: object, time_s: FloatArray, unit: str, chk: Checker) -> None:
+    """Refuse float32/float16 times (``dtype`` of the input) too coarse to tell fixes apart."""
+    if isinstance(dtype, np.dtype) and (dtype.kind != "f" or dtype.itemsize >= 8):
+        return
+    kind = str(dtype).lower()
     if kind not in ("float32", "float16"):
         return
     finite = time_s[np.isfinite(time_s)]

@@ -135,8 +135,8 @@ def validate(
 
     # True duplicates: the same fix twice (same time, position and fields) is merged.
     fields = [time_s, lon, lat, heading, speed, accuracy, odometer, segment]
-    matrix = np.column_stack([f[order] for f in fields if f is not None])
-    kept, merged = merge_duplicates(matrix, order, timed=timed, chk=chk, warnings=warnings)
+    present = [f for f in fields if f is not None]
+    kept, merged = merge_duplicates(present, order, timed=timed, chk=chk, warnings=warnings)
     shared = shared_times(time_s, kept, chk, warnings) if timed else 0
 
     if odometer is not None:
@@ -168,13 +168,13 @@ def validate(
         starts = (np.flatnonzero(seg[1:] != seg[:-1]) + 1).astype(np.int64)
     starts.flags.writeable = False
     out.trace_id = tid
-    out.time_s = frozen(time_s[kept])
-    out.lon = frozen(lon[kept])
-    out.lat = frozen(lat[kept])
-    out.heading_deg = None if heading is None else frozen(heading[kept])
-    out.speed_mps = None if speed is None else frozen(speed[kept])
-    out.accuracy_m = None if accuracy is None else frozen(accuracy[kept])
-    out.odometer_m = None if odometer is None else frozen(odometer[kept])
+    out.time_s = _picked(time_s, kept)
+    out.lon = _picked(lon, kept)
+    out.lat = _picked(lat, kept)
+    out.heading_deg = None if heading is None else _picked(heading, kept)
+    out.speed_mps = None if speed is None else _picked(speed, kept)
+    out.accuracy_m = None if accuracy is None else _picked(accuracy, kept)
+    out.odometer_m = None if odometer is None else _picked(odometer, kept)
     out.segment_starts = starts
     out.report = TraceReport(
         input_rows=n,
@@ -188,8 +188,8 @@ def validate(
     )
 
 
-def frozen(values: FloatArray) -> FloatArray:
-    """A read-only contiguous float64 copy (or view) of ``values``."""
-    out = np.ascontiguousarray(values, dtype=np.float64)
+def _picked(values: FloatArray, kept: IntArray) -> FloatArray:
+    """The ``kept`` rows of ``values`` (a fresh float64 array), read-only."""
+    out = values[kept]
     out.flags.writeable = False
     return out

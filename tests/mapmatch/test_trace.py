@@ -729,3 +729,123 @@ def test_issue_12_match_inputs_must_be_a_trace_and_a_network() -> None:
         InputTypeError, match=r"not a pandas DataFrame; build one with .*from_dataframe"
     ):
         check_match_inputs(tr.to_dataframe(), None)
+
+
+# ------------------------------------------------- numpy arrays without pandas (issue 15)
+
+_T0 = 1_714_550_400.0
+_EQUIVALENCE_CASES: dict[str, dict[str, object]] = {
+    "clean": {"time": [0.0, 5.0, 10.0, 15.0]},
+    "epoch int64": {"time": np.array([0, 5, 10, 15], dtype=np.int64) + int(_T0)},
+    "epoch ms": {"time": (np.array([0.0, 5.0, 10.0, 15.0]) + _T0) * 1e3},
+    "epoch ns uint": {"time": (np.array([0, 5, 10, 15], dtype=np.uint64) + int(_T0)) * 10**9},
+    "unsorted with a true duplicate": {"time": [5.0, 0.0, 5.0, 10.0], "lon": LON[:2] * 2},
+    "shared time": {"time": [0.0, 5.0, 5.0, 10.0]},
+    "no times": {"time": [np.nan] * 4},
+    "implausible times": {"time": [0.0, 0.0, 0.0, 0.0], "lon": [7.42, 7.43, 7.44, 7.45]},
+    "optional fields": {
+        "time": [0.0, 5.0, 10.0, 15.0],
+        "heading": [-90.0, 370.0, np.inf, np.nan],
+        "speed": [0.0, 5.5, np.nan, 7.0],
+        "accuracy": [np.nan, 3.0, 4.0, 5.0],
+        "hdop": [1.2, np.nan, 0.8, 0.9],
+        "odometer": [0.0, 10.0, np.nan, 30.0],
+        "segment": [0, 0, 1, 1],
+    },
+    "float32 relative seconds": {"time": np.array([0.0, 1.0, 2.0, 3.0], dtype=np.float32)},
+    "gcj02": {"time": [0.0, 5.0, 10.0, 15.0], "crs": "gcj02"},
+    # each of the following is refused; the message must be the same on both paths
+    "bool time": {"time": [True, False, True, True]},
+    "bool speed": {"time": [0.0, 1.0, 2.0, 3.0], "speed": [True, False, True, True]},
+    "partly blank time": {"time": [0.0, np.nan, 2.0, 3.0]},
+    "infinite time": {"time": [0.0, np.inf, 2.0, 3.0]},
+    "mixed units": {"time": [_T0, _T0 + 1, (_T0 + 2) * 1e3, _T0 + 3]},
+    "too large": {"time": [1e21, 1e21, 1e21, 1e21]},
+    "float32 epoch": {"time": np.array([_T0, _T0 + 1, _T0 + 2, _T0 + 3], dtype=np.float32)},
+    "lat out of range": {"time": [0.0, 1.0, 2.0, 3.0], "lat": [43.73, 91.0, 43.73, -95.0]},
+    "lat NaN": {"time": [0.0, 1.0, 2.0, 3.0], "lat": [43.73, np.nan, 43.73, 43.74]},
+    "swapped": {"time": [0.0, 1.0, 2.0, 3.0], "lon": LAT, "lat": [107.0, 107.1, 107.2, 107.3]},
+    "negative speed": {"time": [0.0, 1.0, 2.0, 3.0], "speed": [1.0, -2.5, 1.0, 1.0]},
+    "infinite speed": {"time": [0.0, 1.0, 2.0, 3.0], "speed": [1.0, np.inf, 1.0, 1.0]},
+    "zero accuracy": {"time": [0.0, 1.0, 2.0, 3.0], "accuracy": [1.0, 0.0, 1.0, 1.0]},
+    "odometer back": {"time": [0.0, 1.0, 2.0, 3.0], "odometer": [0.0, 10.0, 5.0, 20.0]},
+    "segment NaN": {"time": [0.0, 1.0, 2.0, 3.0], "segment": [0.0, np.nan, 1.0, 1.0]},
+}
+
+
+def _outcome(kwargs: dict[str, object]) -> object:
+    try:
+        tr = Trace(**kwargs)  # type: ignore[arg-type]
+    except InvalidTraceError as exc:
+        return ("error", str(exc), exc.field, exc.rows)
+    fields = ("time_s", "lon", "lat", "heading_deg", "speed_mps", "accuracy_m", "odometer_m")
+    arrays = {f: getattr(tr, f) for f in fields}
+    for name, values in arrays.items():
+        assert values is None or (values.dtype == np.float64 and not values.flags.writeable), name
+    return (
+        {f: None if v is None else v.tobytes() for f, v in arrays.items()},
+        tr.segment_starts.tolist(),
+        tr.report,
+    )
+
+
+@pytest.mark.parametrize("case", list(_EQUIVALENCE_CASES), ids=list(_EQUIVALENCE_CASES))
+def test_numpy_arrays_are_validated_without_pandas_to_the_same_result(
+    case: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    given = {"lon": LON, "lat": LAT, "trace_id": case, **_EQUIVALENCE_CASES[case]}
+    as_arrays, as_series = {}, {}
+    for key, value in given.items():
+        if key in ("trace_id", "crs"):
+            as_arrays[key] = as_series[key] = value
+            continue
+        arr = np.asarray(value)
+        as_arrays[key] = arr
+        as_series[key] = pd.Series(arr)
+    reference = _outcome(as_series)
+    with monkeypatch.context() as patched:  # the arrays path must not build a pandas Series
+        for module in ("checks", "times"):
+            patched.setattr(f"mapmatch.trace.{module}.as_series", _no_pandas)
+        fast = _outcome(as_arrays)
+    assert fast == reference
+
+
+def _no_pandas(values: object) -> object:
+    msg = "a numpy array went through pandas"
+    raise AssertionError(msg)
+
+
+def test_datetime64_arrays_give_the_times_pandas_gives() -> None:
+    stamps = np.array(
+        ["2024-05-01T08:00:00", "2024-05-01T08:00:01.250", "NaT", "2262-04-12T00:00:00"],
+        dtype="datetime64[ms]",
+    )
+    lon, lat = np.array(LON[:3]), np.array(LAT[:3])
+    for unit in ("s", "ms", "us", "ns"):
+        # the year 2262 is beyond nanosecond epochs: numpy itself cannot hold it in ns
+        values = stamps[[0, 1, 3] if unit != "ns" else [0, 1, 1]].astype(f"datetime64[{unit}]")
+        fast = Trace(time=values, lon=lon, lat=lat, trace_id=unit)
+        reference = Trace(time=pd.Series(values), lon=lon, lat=lat, trace_id=unit)
+        assert fast.time_s.tobytes() == reference.time_s.tobytes(), unit
+        assert fast.report == reference.report
+        assert fast.report.time_unit == "datetime"
+        step = fast.time_s[1] - fast.time_s[0]
+        assert step == pytest.approx(1.0 if unit == "s" else 1.25, abs=1e-6)
+    lon4, lat4 = np.array(LON), np.array(LAT)
+    with pytest.raises(InvalidTraceError, match=r"time is missing or not a time.*row 2") as err:
+        Trace(time=stamps, lon=lon4, lat=lat4)
+    with pytest.raises(InvalidTraceError) as ref:
+        Trace(time=pd.Series(stamps), lon=lon4, lat=lat4)
+    assert str(err.value) == str(ref.value)
+
+
+def test_validation_never_writes_into_the_callers_arrays() -> None:
+    time = np.array([5.0, 0.0, 5.0, 10.0])
+    heading = np.array([-90.0, 370.0, np.inf, 10.0])
+    lon, lat = np.array(LON), np.array(LAT)
+    before = [a.copy() for a in (time, heading, lon, lat)]
+    tr = Trace(time=time, lon=lon, lat=lat, heading=heading, crs="gcj02")
+    for a, b in zip((time, heading, lon, lat), before, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert not np.shares_memory(tr.time_s, time)
+    assert not np.shares_memory(tr.lon, lon)
