@@ -545,7 +545,7 @@ def markdown(rows: list[Row], header: dict[str, Any]) -> str:
         f"{scoring.DEFAULT_MAX_ANGLE_DEG:g} deg. Input `positions`: time, lon, lat; `full`: "
         "plus heading, speed, accuracy, odometer (FMM, leuven and mappymatch use positions "
         "only, so their one run stands in both; Meili uses the per-point accuracy). "
-        f"Our code: {header['ours_tree']} (git HEAD {header['git_head'][:10]}). "
+        f"Our code: {header['ours_tree']} (git HEAD {header['git_head'][:10]} at the start). "
         f"Run wall time {header['wall_s'] / 60:.1f} min; load average "
         f"{header['loadavg_start']:.1f} at the start, {header['loadavg_end']:.1f} at the end "
         "(other work on the machine inflates wall-clock points/s; `CPU points/s` uses the "
@@ -680,6 +680,7 @@ def main(argv: list[str] | None = None) -> int:
     """Run the comparison, print and write the tables."""
     t_start = time.perf_counter()
     load_start = os.getloadavg()[0]
+    head_at_start = _git_head()
     a = parse_args(argv)
     if a.ours_tree is not None:
         tree = a.ours_tree.resolve()
@@ -891,7 +892,7 @@ def main(argv: list[str] | None = None) -> int:
         "fmm": fmm_files,
         "command": " ".join([Path(sys.executable).name, *sys.argv]),
         "ours_tree": str(a.ours_tree) if a.ours_tree else "installed package",
-        "git_head": _git_head(),
+        "git_head": head_at_start,
         "wall_s": time.perf_counter() - t_start,
         "loadavg_start": load_start,
         "loadavg_end": os.getloadavg()[0],
