@@ -2,12 +2,13 @@
 
     .venv/bin/python benchmarks/bench_trace.py [--batch 300] [--repeats 40]
 
-Times ``Trace(time=..., lon=..., lat=...)`` from float64 numpy arrays (the path the batch,
-the service and the peer harness take: no pandas), with and without heading, speed and
-accuracy, at 2 and 30 points; then, for reference, the same trace from Python lists and from
-point dicts (``Trace.from_records``, the JSON body), which go through pandas. Process CPU
-time per trace, best of ``--repeats`` batches of ``--batch`` (the machine is shared: the best
-batch is the least disturbed one).
+Times ``Trace(time=..., lon=..., lat=...)`` from float64 numpy arrays (the path the batch
+and the peer harness take), with and without heading, speed and accuracy; the same trace
+from Python lists of floats, and from point dicts (``Trace.from_records``, the service's JSON
+body) with epoch or UTC ISO-8601 times; none of them needs pandas (other time text, id keys,
+DataFrames and files do). At 2, 30 and 100 points; process CPU time per trace, best of
+``--repeats`` batches of ``--batch`` (the machine is shared: the best batch is the least
+disturbed one).
 
 To compare with an older tree, run this file with that tree first on ``PYTHONPATH``.
 """
@@ -41,6 +42,8 @@ def _cases(n: int) -> list[tuple[str, Callable[[], object]]]:
     heading, speed, accuracy = np.full(n, 90.0), np.full(n, 5.0), np.full(n, 4.0)
     lists = {"time": t.tolist(), "lon": lon.tolist(), "lat": lat.tolist()}
     records = [{"time": a, "lon": b, "lat": c} for a, b, c in zip(*lists.values(), strict=True)]
+    iso = np.datetime_as_string(t.astype("datetime64[s]"), timezone="UTC").tolist()
+    text = [{**r, "time": stamp} for r, stamp in zip(records, iso, strict=True)]
     return [
         ("arrays: time, lon, lat", lambda: Trace(time=t, lon=lon, lat=lat)),
         (
@@ -49,8 +52,9 @@ def _cases(n: int) -> list[tuple[str, Callable[[], object]]]:
                 time=t, lon=lon, lat=lat, heading=heading, speed=speed, accuracy=accuracy
             ),
         ),
-        ("lists: time, lon, lat (pandas)", lambda: Trace(**lists)),
-        ("from_records (pandas)", lambda: Trace.from_records(records)),
+        ("lists: time, lon, lat", lambda: Trace(**lists)),
+        ("from_records", lambda: Trace.from_records(records)),
+        ("from_records, ISO-8601 times", lambda: Trace.from_records(text)),
     ]
 
 
@@ -61,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=40, help="timed batches per case")
     args = parser.parse_args(argv)
     print(f"Trace construction, process CPU time per trace (best of {args.repeats} x {args.batch})")
-    for n in (2, 30):
+    for n in (2, 30, 100):
         for name, build in _cases(n):
             build()
             best = min(

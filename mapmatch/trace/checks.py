@@ -31,6 +31,7 @@ __all__ = [
     "check_lengths",
     "check_odometer",
     "checked_column",
+    "is_plain_number",
     "plain_numbers",
     "within",
 ]
@@ -38,6 +39,7 @@ __all__ = [
 SHOW: Final = 5
 """Offending rows quoted in a message."""
 
+_INT64: Final = (-(2**63), 2**63)
 _LAT: Final = column("lat")
 _LON: Final = column("lon")
 
@@ -192,10 +194,33 @@ def within(values: FloatArray, col: Column) -> BoolArray:
 
 
 def plain_numbers(values: object) -> npt.NDArray[Any] | None:
-    """``values`` when it is a 1-D numpy array of numbers or booleans (no pandas needed)."""
-    if type(values) is np.ndarray and values.ndim == 1 and values.dtype.kind in "biuf":
-        return values
+    """
+    ``values`` as a numpy array when no pandas is needed to read them, else None.
+
+    That is a 1-D numpy array of numbers or booleans (as it is), or a list or tuple of
+    Python floats and ints (int64 range; not bools), as float64: what pandas would make of
+    them. Anything else (blanks, text, Series ...) is for :func:`as_series`.
+
+    Examples
+    --------
+    >>> plain_numbers([0, 1.5]), plain_numbers([0, None]), plain_numbers([True, 1])
+    (array([0. , 1.5]), None, None)
+    """
+    kind = type(values)
+    if kind is np.ndarray:
+        arr = cast("npt.NDArray[Any]", values)
+        return arr if arr.ndim == 1 and arr.dtype.kind in "biuf" else None
+    if kind is list or kind is tuple:
+        items = cast("list[object]", values)
+        if all(map(is_plain_number, items)):
+            return np.array(items, dtype=np.float64)
     return None
+
+
+def is_plain_number(value: object) -> bool:
+    """Whether ``value`` is a Python float, or an int in the int64 range (not a bool)."""
+    kind = type(value)
+    return kind is float or (kind is int and _INT64[0] <= value < _INT64[1])  # type: ignore[operator]
 
 
 def _fmt(value: object) -> str:

@@ -11,26 +11,28 @@ dropped records) for :func:`~mapmatch.trace.validation.validate`.
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from mapmatch.errors import InvalidTraceError
-from mapmatch.trace.checks import SHOW
-from mapmatch.trace.columns import FIELD_ALIASES, canonical, input_columns
+from mapmatch.trace.checks import SHOW, is_plain_number
+from mapmatch.trace.columns import FIELD_ALIASES, canonical, id_kind, input_columns
 from mapmatch.trace.readers import RawTrace, id_columns, read_raw_traces
 from mapmatch.trace.report import Origin, in_source
 
 if TYPE_CHECKING:
-    from collections.abc import Hashable, Iterable
+    from collections.abc import Hashable, Iterable, Mapping, Sequence
 
     import pandas as pd
 
     from mapmatch.types import IntArray
 
-__all__ = ["frame_columns", "raw_origin", "resolve_columns", "single_raw"]
+__all__ = ["frame_columns", "raw_origin", "record_columns", "resolve_columns", "single_raw"]
 
 _REQUIRED = tuple(c.name for c in input_columns(required_only=True))
+_IGNORED = ""  # a key that names no column
 
 
 def resolve_columns(
@@ -118,3 +120,61 @@ def single_raw(df: pd.DataFrame, *, trace_id: str | None, id_column: str | None)
         raise InvalidTraceError(msg, trace_id=name, field="trace_id")
     raw = raws[0]
     return raw if trace_id is None else dataclasses.replace(raw, trace_id=trace_id)
+
+
+def record_columns(records: Sequence[Mapping[str, object]]) -> dict[str, object] | None:
+    """
+    The field columns of point objects, without a table where none is needed.
+
+    That is when every value under a column's name is a Python ``float`` or ``int`` (not a
+    bool), text under ``time``, or ``None`` (unknown; so is a missing key), no two keys give
+    one field, no key is an id column and ``lat`` and ``lon`` are there. Then the columns
+    are float64 arrays (a list for text times, read by :func:`~.times.parse_time`), and
+    validation gives what the table path (:func:`frame_columns` of
+    ``pandas.DataFrame.from_records``) gives. Otherwise ``None``: the caller takes the table
+    path, which also words every error.
+
+    Examples
+    --------
+    >>> cols = record_columns([{"t": 0, "lat": 43.73, "LNG": 7.42}, {"t": 5, "lat": 43.74}])
+    >>> {k: v.tolist() for k, v in cols.items()}
+    {'time': [0.0, 5.0], 'lat': [43.73, 43.74], 'lon': [7.42, nan]}
+    >>> record_columns([{"trace_id": "a", "lat": 1.0, "lon": 2.0}] * 2) is None
+    True
+    """
+    n = len(records)
+    if n < 2:
+        return None
+    field_of: dict[object, str] = {}
+    columns: dict[str, list[object]] = {}
+    text_times = False
+    nan = math.nan
+    for i, record in enumerate(records):
+        for key, value in record.items():
+            field = field_of.get(key)
+            if field is None:
+                field = canonical(key)
+                if field is None:
+                    if id_kind(key) is not None:
+                        return None  # rows of a fleet: grouped (or refused) by the table path
+                    field = _IGNORED
+                elif field in columns:
+                    return None  # two keys for one field: the table path names both
+                else:
+                    columns[field] = [nan] * n
+                field_of[key] = field
+            if field is _IGNORED or value is None:
+                continue
+            if is_plain_number(value):
+                columns[field][i] = float(value)  # type: ignore[arg-type]
+            elif field == "time" and type(value) is str:
+                columns[field][i] = value
+                text_times = True
+            else:
+                return None
+    if any(f not in columns for f in _REQUIRED):
+        return None
+    return {
+        field: values if field == "time" and text_times else np.array(values, dtype=np.float64)
+        for field, values in columns.items()
+    }

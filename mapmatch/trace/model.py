@@ -20,7 +20,7 @@ import pandas as pd
 
 from mapmatch.errors import InvalidTraceError, TraceFileError
 from mapmatch.trace.checks import SHOW
-from mapmatch.trace.frames import frame_columns, raw_origin, single_raw
+from mapmatch.trace.frames import frame_columns, raw_origin, record_columns, single_raw
 from mapmatch.trace.readers import RawTrace, read_raw_traces
 from mapmatch.trace.report import Origin, TraceReport
 from mapmatch.trace.validation import UERE_M, TraceFields, validate
@@ -204,6 +204,11 @@ class Trace(TraceFields):
                 'not an object; send each point as {"time": ..., "lat": ..., "lon": ...}'
             )
             raise InvalidTraceError(msg, trace_id=trace_id, rows=bad)
+        columns = record_columns(records)
+        if columns is not None:  # numbers only: no table needed (the same result, faster)
+            self = cls.__new__(cls)
+            validate(self, columns, trace_id=trace_id or "trace", crs=crs, origin=_NO_ORIGIN)
+            return self
         frame = pd.DataFrame.from_records(list(records))
         return cls._from_raw(single_raw(frame, trace_id=trace_id, id_column=None), crs=crs)
 

@@ -16,6 +16,7 @@ from mapmatch.errors import (
     TraceFileError,
 )
 from mapmatch.trace import UERE_M, Trace, TraceReport, chinacrs
+from mapmatch.trace.frames import record_columns
 
 LON = [7.4200, 7.4201, 7.4202, 7.4203]
 LAT = [43.7300, 43.7301, 43.7302, 43.7303]
@@ -810,6 +811,20 @@ def test_numpy_arrays_are_validated_without_pandas_to_the_same_result(
     assert fast == reference
 
 
+@pytest.mark.parametrize("case", list(_EQUIVALENCE_CASES), ids=list(_EQUIVALENCE_CASES))
+def test_lists_of_numbers_give_what_pandas_gives(case: str) -> None:
+    given = {"lon": LON, "lat": LAT, "trace_id": case, **_EQUIVALENCE_CASES[case]}
+    as_lists, as_series = {}, {}
+    for key, value in given.items():
+        if key in ("trace_id", "crs"):
+            as_lists[key] = as_series[key] = value
+            continue
+        items = np.asarray(value).tolist()  # Python floats, ints or bools
+        as_lists[key] = items
+        as_series[key] = pd.Series(items)
+    assert _outcome(as_lists) == _outcome(as_series)
+
+
 def _no_pandas(values: object) -> object:
     msg = "a numpy array went through pandas"
     raise AssertionError(msg)
@@ -849,3 +864,104 @@ def test_validation_never_writes_into_the_callers_arrays() -> None:
         np.testing.assert_array_equal(a, b)
     assert not np.shares_memory(tr.time_s, time)
     assert not np.shares_memory(tr.lon, lon)
+
+
+def _record(**fields: object) -> dict[str, object]:
+    return fields
+
+
+_P = [(7.4200, 43.7300), (7.4206, 43.7304), (7.4212, 43.7308), (7.4218, 43.7312)]
+_TEXT_TIMES: dict[str, list[object]] = {
+    "UTC": [f"2024-05-01T08:00:0{i}.25Z" for i in range(4)],
+    "naive, space, unsorted": ["2024-05-01 08:00:09", "2024-05-01 08:00:01"],
+    "offsets": ["2024-05-01T10:00:00+02:00", "2024-05-01T08:00:05Z"],
+    "a day that does not exist": ["2024-02-30T08:00:00Z", "2024-02-28T08:00:00Z"],
+    "leap second": ["2016-12-31T23:59:60Z", "2017-01-01T00:00:01Z"],
+    "blank and missing": ["2024-05-01T08:00:00Z", "", None, "2024-05-01T08:00:03Z"],
+    "numbers as text": ["1714550400", "1714550405"],
+    "text and numbers": ["2024-05-01T08:00:00Z", 1714550405],
+    "beyond 2262": ["2300-01-01T00:00:00Z", "2300-01-01T00:00:05Z"],
+    "not a time": ["2024-05-01T08:00:00Z", "soon"],
+}
+_RECORD_CASES: dict[str, list[dict[str, object]]] = {
+    "numbers": [{"time": 5 * i, "lon": x, "lat": y} for i, (x, y) in enumerate(_P)],
+    "aliases any case, extra keys": [
+        {"T": 5.0 * i, "LNG": x, "Latitude": y, "note": "x"} for i, (x, y) in enumerate(_P)
+    ],
+    "optional fields with gaps": [
+        _record(time=5 * i, lon=x, lat=y, speed=None if i == 1 else 3.0, heading=-90)
+        for i, (x, y) in enumerate(_P)
+    ]
+    + [{"time": 99, "lon": 7.43, "lat": 43.74, "accuracy": 4}],
+    "a key missing in some points": [
+        {"time": 5 * i, "lon": x, "lat": y, **({"odometer": 10.0 * i} if i % 2 else {})}
+        for i, (x, y) in enumerate(_P)
+    ],
+    "ns epochs as ints": [
+        {"time": (1_714_550_400 + i) * 10**9 + 7, "lon": x, "lat": y} for i, (x, y) in enumerate(_P)
+    ],
+    "no times": [_record(time=None, lon=x, lat=y) for x, y in _P],
+    "unsorted and repeated": [
+        {"time": t, "lon": 7.42, "lat": 43.73 + t * 1e-4} for t in (5, 0, 5, 5)
+    ],
+    "some times blank": [
+        {"time": None if i == 2 else i, "lon": x, "lat": y} for i, (x, y) in enumerate(_P)
+    ],
+    "lat out of range": [{"time": i, "lon": x, "lat": 95.0} for i, (x, _) in enumerate(_P)],
+    "infinite speed": [
+        {"time": i, "lon": x, "lat": y, "speed": math.inf} for i, (x, y) in enumerate(_P)
+    ],
+    **{
+        f"text times: {name}": [
+            _record(time=stamps[i % len(stamps)], lon=x, lat=y) for i, (x, y) in enumerate(_P)
+        ]
+        for name, stamps in _TEXT_TIMES.items()
+    },
+    # these take the table path: ids, booleans, numpy scalars, two keys for one field, no
+    # lon, one point
+    "an id key": [{"trace_id": "a", "time": i, "lon": x, "lat": y} for i, (x, y) in enumerate(_P)],
+    "boolean speed": [
+        {"time": i, "lon": x, "lat": y, "speed": True} for i, (x, y) in enumerate(_P)
+    ],
+    "numpy scalars": [{"time": np.float64(i), "lon": x, "lat": y} for i, (x, y) in enumerate(_P)],
+    "two keys for lon": [{"time": i, "lon": x, "lng": x, "lat": y} for i, (x, y) in enumerate(_P)],
+    "no lon": [{"time": i, "lat": y} for i, (_, y) in enumerate(_P)],
+    "one point": [{"time": 0, "lon": 7.42, "lat": 43.73}],
+}
+
+
+_TABLE_CASES = list(_RECORD_CASES)[list(_RECORD_CASES).index("an id key") :]
+
+
+@pytest.mark.parametrize("case", list(_RECORD_CASES), ids=list(_RECORD_CASES))
+def test_point_records_give_what_the_table_path_gives(case: str) -> None:
+    records = _RECORD_CASES[case]
+    # numbers only are validated from arrays, the rest through a table
+    assert (record_columns(records) is None) == (case in _TABLE_CASES)
+
+    def outcome(build: object) -> object:
+        try:
+            tr = build()  # type: ignore[operator]
+        except MapMatchError as exc:
+            return (type(exc), str(exc), getattr(exc, "field", None), getattr(exc, "rows", None))
+        fields = ("time_s", "lon", "lat", "heading_deg", "speed_mps", "accuracy_m", "odometer_m")
+        values = [None if (v := getattr(tr, f)) is None else v.tobytes() for f in fields]
+        return (tr.trace_id, values, tr.segment_starts.tolist(), tr.report)
+
+    fast = outcome(lambda: Trace.from_records(records, trace_id="bus", crs="gcj02"))
+    table = pd.DataFrame.from_records(records)
+    reference = outcome(lambda: Trace.from_dataframe(table, trace_id="bus", crs="gcj02"))
+    assert fast == reference
+
+
+def test_plain_utc_text_times_and_numbers_need_no_pandas(monkeypatch: pytest.MonkeyPatch) -> None:
+    for module, name in (("checks", "as_series"), ("times", "_parse_with_pandas")):
+        monkeypatch.setattr(f"mapmatch.trace.{module}.{name}", _no_pandas)
+    monkeypatch.setattr(pd.DataFrame, "from_records", _no_pandas)
+    for case in ("numbers", "optional fields with gaps", "text times: UTC"):
+        tr = Trace.from_records(_RECORD_CASES[case])
+        assert len(tr) >= 4
+    tr = Trace.from_records(_RECORD_CASES["text times: naive, space, unsorted"])
+    assert tr.report.time_unit == "iso"
+    assert tr.report.reordered_rows == 2
+    assert np.diff(tr.time_s).tolist() == [0.0, 8.0, 0.0]
