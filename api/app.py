@@ -33,7 +33,7 @@ from api.logs import configure_logging
 from api.metrics import ServiceMetrics
 from api.middleware import SCOPE_KEY, ServiceMiddleware
 from api.networks import NetworkRegistry
-from api.routes import router
+from api.routes import osrm, router, valhalla
 from api.schemas import ErrorResponse, MatchRequest
 from api.service import MatchService, validation_error
 from api.settings import Settings
@@ -115,6 +115,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.service = service
     app.state.metrics = metrics
     app.include_router(router)
+    app.include_router(osrm.router)  # OSRM- and Valhalla-compatible routes (issue 16)
+    app.include_router(valhalla.router)
     app.add_exception_handler(MapMatchError, _project_error)
     app.add_exception_handler(RequestValidationError, _validation_error)
     app.add_exception_handler(StarletteHTTPException, _http_error)
