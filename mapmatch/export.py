@@ -593,12 +593,27 @@ def write_table(result: MatchResult, kind: GeoKind, path: Path, fmt: str) -> Non
     frames = {"segments": segments_frame, "edges": edges_frame, "points": points_frame}
     frame = frames[kind](result)
     if fmt == "csv":
-        frame.to_csv(path, index=False, date_format=CSV_TIME_FORMAT)
+        _iso_times(frame).to_csv(path, index=False)
     elif fmt == "parquet":
         frame.to_parquet(path, index=False)
     else:
         msg = f"unknown table format {fmt!r}; use one of {', '.join(TABLE_FORMATS)}"
         raise ValueError(msg)
+
+
+def _iso_times(frame: pd.DataFrame) -> pd.DataFrame:
+    """The frame with its UTC datetime columns as ISO 8601 text (:data:`CSV_TIME_FORMAT`)."""
+    import pandas as pd
+
+    out = frame.copy()
+    for name in frame.columns:
+        column = frame[name]
+        if isinstance(column.dtype, pd.DatetimeTZDtype):
+            naive = column.dt.tz_convert(None).to_numpy().astype("datetime64[us]")
+            text = np.char.add(np.datetime_as_string(naive, unit="us"), "Z").astype(object)
+            text[np.isnat(naive)] = None
+            out[name] = text
+    return out
 
 
 def write_geopackage(result: MatchResult, path: Path) -> None:

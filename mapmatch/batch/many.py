@@ -154,7 +154,7 @@ def match_many(
         min(count, len(items)),
         None,
         client=client,
-        preload=["mapmatch.batch.many"],
+        preload=["mapmatch.batch.many", "mapmatch.batch.warm"],
         shared=net,
     )
     bar = _bar(len(items), progress)

@@ -16,10 +16,10 @@ Per trace, in the output folder:
 ``gpkg``
     ``<name>.gpkg``: one GeoPackage with the layers ``segments``, ``edges`` and ``points``.
 
-Every file is written to a hidden temporary file in the same folder and renamed into place
-(``os.replace``), so a file under its final name is always complete. The sidecar is renamed
-first and the main file last: a trace's outputs are complete exactly when its main file
-exists (:func:`outputs_complete`).
+Every file is written to a hidden temporary file in the same folder, flushed to the disk and
+renamed into place (:mod:`mapmatch.batch.files`), so a file under its final name is always
+complete. The sidecars are renamed first and the main file last: a trace's outputs are
+complete exactly when its main file exists (:func:`outputs_complete`).
 
 ``summary.csv`` has one row per trace (and one per unreadable file). While a batch runs, rows
 are appended and flushed one by one (:class:`SummaryLog`); a line without its final newline
@@ -33,17 +33,22 @@ import contextlib
 import csv
 import io
 import math
-import os
-import tempfile
 from dataclasses import asdict, dataclass, fields
 from functools import partial
-from pathlib import Path
+from pathlib import Path  # noqa: TC003 - the doctests use it
 from typing import TYPE_CHECKING, Any
 
 from mapmatch import export
+from mapmatch.batch.files import (
+    Committer,
+    atomic_write,
+    remove_temporaries,
+    sync_folder,
+)
+from mapmatch.batch.inputs import printable
 
 if TYPE_CHECKING:
-    from collections.abc import Callable, Iterable
+    from collections.abc import Iterable
 
     from mapmatch.export import GeoKind
     from mapmatch.result import MatchResult
@@ -59,6 +64,7 @@ __all__ = [
     "outputs_complete",
     "read_summary",
     "remove_temporaries",
+    "sync_folder",
     "write_result",
     "write_summary",
 ]
@@ -79,7 +85,6 @@ _FILES: dict[str, tuple[tuple[str, GeoKind | None], ...]] = {
 }
 #: File name of the per-trace summary in the output folder.
 SUMMARY_NAME = "summary.csv"
-_TMP_PREFIX = ".tmp-"
 #: Joins a trace's warnings in the ``warnings`` column of ``summary.csv``.
 WARNING_SEPARATOR = " | "
 
@@ -184,8 +189,20 @@ class SummaryRow:
             error=error,
         )
 
+    def __post_init__(self) -> None:
+        for f in fields(self):  # a file name that is not UTF-8 must still print and save
+            value = getattr(self, f.name)
+            if isinstance(value, str):
+                object.__setattr__(self, f.name, printable(value))
+
     def to_csv_values(self) -> list[str]:
-        """The row's cells as ``summary.csv`` writes them (no line breaks inside)."""
+        """
+        The row's cells as ``summary.csv`` writes them (no line breaks inside).
+
+        A text cell a spreadsheet would run as a formula (starting with ``=``, ``+``, ``@``,
+        a tab, or ``-`` and more) is written with a leading ``'``, as is one that starts
+        with ``'`` itself; :meth:`from_csv_values` takes it off again.
+        """
         out: list[str] = []
         for f in fields(self):
             value = getattr(self, f.name)
@@ -196,9 +213,11 @@ class SummaryRow:
                     text = f"{value:.3f}"
                 else:
                     text = f"{value:.10g}"
+            elif isinstance(value, str):
+                text = _defused(value.replace("\r", " ").replace("\n", " "))
             else:
                 text = str(value)
-            out.append(text.replace("\r", " ").replace("\n", " "))
+            out.append(text)
         return out
 
     @classmethod
@@ -217,7 +236,7 @@ class SummaryRow:
             elif f.type == "float":
                 kwargs[f.name] = float(text) if text else float("nan")
             else:
-                kwargs[f.name] = text
+                kwargs[f.name] = text[1:] if text.startswith("'") else text
         return cls(**kwargs)
 
     def to_dict(self) -> dict[str, object]:
@@ -258,6 +277,20 @@ class SummaryRow:
 SUMMARY_COLUMNS = tuple(f.name for f in fields(SummaryRow))
 
 
+def _defused(text: str) -> str:
+    """
+    A text cell that no spreadsheet runs as a formula (OWASP's CSV injection advice).
+
+    Examples
+    --------
+    >>> [_defused(t) for t in ("=1+1", "@SUM(A1)", "-2+3", "-", "'x", "bus-12")]
+    ["'=1+1", "'@SUM(A1)", "'-2+3", '-', "''x", 'bus-12']
+    """
+    if text[:1] in ("=", "+", "@", "\t", "'") or (text.startswith("-") and len(text) > 1):
+        return "'" + text
+    return text
+
+
 def output_paths(out_dir: Path, name: str, fmt: str) -> tuple[Path, ...]:
     """
     The files of one trace, main file last.
@@ -284,42 +317,14 @@ def outputs_complete(out_dir: Path, name: str, fmt: str) -> bool:
     return bool(name) and all(p.is_file() for p in output_paths(out_dir, name, fmt))
 
 
-def atomic_write(path: Path, write: Callable[[Path], object]) -> None:
-    """
-    Write a file through a hidden temporary sibling, then rename it into place.
-
-    Parameters
-    ----------
-    path
-        Final file name.
-    write
-        Called with the temporary path; must create that file.
-    """
-    fd, tmp_name = tempfile.mkstemp(
-        prefix=f"{_TMP_PREFIX}{path.name}.", suffix=path.suffix, dir=path.parent
-    )
-    os.close(fd)
-    tmp = Path(tmp_name)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise
-
-
-def remove_temporaries(out_dir: Path) -> int:
-    """Delete temporary files a killed run left in ``out_dir``; return how many."""
-    removed = 0
-    for tmp in out_dir.glob(f"{_TMP_PREFIX}*"):
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-            removed += 1
-    return removed
-
-
-def write_result(result: MatchResult, out_dir: Path, name: str, fmt: str) -> None:
+def write_result(
+    result: MatchResult,
+    out_dir: Path,
+    name: str,
+    fmt: str,
+    *,
+    committer: Committer | None = None,
+) -> None:
     """
     Write one trace's outputs atomically (sidecars first, main file last).
 
@@ -333,18 +338,23 @@ def write_result(result: MatchResult, out_dir: Path, name: str, fmt: str) -> Non
         Output name without suffix (from :func:`~mapmatch.batch.inputs.assign_output_names`).
     fmt
         One of :data:`FORMATS`.
+    committer
+        Put the files in place on this committer's thread (grouped under ``name``); by
+        default before returning.
     """
     paths = output_paths(out_dir, name, fmt)
+    place = partial(atomic_write, committer=committer, group=name)
     if fmt == "geojson":
         data = export.geojson_bytes(result) + b"\n"
-        atomic_write(paths[0], lambda tmp: tmp.write_bytes(data))
-        return
-    if fmt == "gpkg":
-        atomic_write(paths[0], lambda tmp: export.write_geopackage(result, tmp))
-        return
-    for path, (_, kind) in zip(paths, _FILES[fmt], strict=True):
-        assert kind is not None
-        atomic_write(path, partial(export.write_table, result, kind, fmt=fmt))
+        place(paths[0], lambda tmp: tmp.write_bytes(data))
+    elif fmt == "gpkg":
+        place(paths[0], lambda tmp: export.write_geopackage(result, tmp))
+    else:
+        for path, (_, kind) in zip(paths, _FILES[fmt], strict=True):
+            assert kind is not None
+            place(path, partial(export.write_table, result, kind, fmt=fmt))
+    if committer is not None:
+        committer.seal(name)
 
 
 def _row_line(row: SummaryRow) -> str:

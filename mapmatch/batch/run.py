@@ -3,22 +3,29 @@ Batch matching: folders of trace files in, one output per trace and ``summary.cs
 
 :func:`run_batch` is the engine behind ``mapmatch match``:
 
-1. the road network is loaded once here, so that its compiled form is in the disk cache;
-2. the inputs are found and every file is scanned for its traces (an unreadable file becomes
-   a ``failed`` summary row and the batch goes on); each trace gets a safe, unique output
-   name; with ``resume`` the traces whose outputs are complete are skipped;
+1. the output folder is made and checked writable (else one clear error, before any work);
+   the road network is loaded once here, so that its compiled form is in the disk cache;
+2. the inputs are found (files in an output folder are never read back) and every file is
+   scanned for its traces (an unreadable file becomes a ``failed`` summary row and the batch
+   goes on); each trace gets a safe output name that no other trace's files can meet; with
+   ``resume`` the traces whose outputs are complete are skipped;
 3. the remaining traces are cut into tasks (a chunk of traces of one file) and run in this
-   process, a local process pool, or on a Dask cluster (:mod:`mapmatch.batch.executors`).
-   A task (:func:`match_chunk`) loads the network lazily once per worker process from the
-   cache, reads its file, matches and writes each trace atomically, and returns one summary
-   row per trace; a failing trace is recorded with its error and the task goes on;
-4. rows are appended to ``summary.csv`` as tasks finish, and the file is rewritten in input
-   order at the end.
+   process, a local process pool (at most one worker per core unless forced), or on a Dask
+   cluster (:mod:`mapmatch.batch.executors`), the network sent to each worker once. A task
+   (:func:`~mapmatch.batch.tasks.match_chunk`) reads its file, matches and writes each trace
+   atomically and returns one summary row per trace; a failing trace is recorded with its
+   error and the task goes on;
+4. when a worker process dies, the traces of its tasks that it finished (their rows are in
+   its journal, their files on disk) are reported as they are, and the others are run once
+   more, one per task, in a fresh pool; only a trace lost twice is reported failed;
+5. rows are appended to ``summary.csv`` as tasks finish; at the end the temporaries of dead
+   workers are removed, the file is rewritten in input order and the folder is synced to
+   the disk.
 
 "Complete" on resume means: the trace's main output file exists (written last, by rename,
 so never partial; see :mod:`mapmatch.batch.outputs`), ``summary.csv`` holds an ``ok`` row
 for it under the same output name, and ``run.json`` shows the earlier run used the same
-network, format and matcher options.
+network, format, coordinate frame and matcher options.
 """
 
 from __future__ import annotations
@@ -26,21 +33,18 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import os
-import socket
+import tempfile
 import threading
 import time
-from collections import Counter
 from dataclasses import dataclass, field
 from math import ceil
 from pathlib import Path
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING
 
 import roadnets
-from mapmatch.batch.executors import make_executor
+from mapmatch.batch.executors import WorkerLostError, available_cores, make_executor
+from mapmatch.batch.files import atomic_write, remove_temporaries, sync_folder
 from mapmatch.batch.inputs import (
-    STDIN,
-    BatchInputError,
     FileScan,
     TraceRef,
     assign_output_names,
@@ -53,21 +57,24 @@ from mapmatch.batch.outputs import (
     SUMMARY_NAME,
     SummaryLog,
     SummaryRow,
-    atomic_write,
     outputs_complete,
     read_summary,
-    remove_temporaries,
-    write_result,
     write_summary,
 )
+from mapmatch.batch.report import BatchProgress, BatchReport
+from mapmatch.batch.tasks import (
+    ChunkOutcome,
+    ChunkTask,
+    match_chunk,
+    read_journals,
+    remove_journals,
+)
 from mapmatch.config import MatchConfig
-from mapmatch.errors import InvalidTraceError, MapMatchError
-from mapmatch.matcher import match
-from mapmatch.trace import Trace, read_traces, trace_from_raw
-from mapmatch.trace.readers import read_raw_traces
+from mapmatch.errors import MapMatchError
+from mapmatch.trace import SUPPORTED_CRS
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Callable
     from typing import BinaryIO
 
 __all__ = [
@@ -87,10 +94,15 @@ __all__ = [
 MANIFEST_NAME = "run.json"
 _MAX_CHUNK = 32
 _CHUNKS_PER_SLOT = 4
+#: Traces per task in this process: the disk flushes of one run behind the next's matching.
+_INLINE_CHUNK = 8
+_log = logging.getLogger(__name__)
+
+Key = tuple[str, int, str]
 
 
 class BatchError(MapMatchError, ValueError):
-    """A batch cannot start: bad options, or ``--resume`` into a folder made otherwise."""
+    """A batch cannot start: bad options, an unusable output folder, or a foreign ``--resume``."""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -110,11 +122,14 @@ class BatchOptions:
         Compiled-network cache shared by all workers; ``None`` for the default
         (``$MAPMATCH_CACHE_DIR`` or ``~/.cache/mapmatch``).
     format
-        ``geojson``, ``csv`` or ``parquet``.
+        One of :data:`~mapmatch.batch.outputs.FORMATS`.
     config
         Matcher parameters, the same for every trace.
     workers
-        Local worker processes (``None``: one per core; 1: in this process).
+        Local worker processes (``None``: one per core; 1: in this process); more than the
+        cores this process may use are cut to that number unless ``force_workers``.
+    force_workers
+        Start ``workers`` processes even when there are fewer cores.
     scheduler
         Dask scheduler address; runs the tasks on that cluster instead.
     scheduler_timeout_s
@@ -122,7 +137,7 @@ class BatchOptions:
     resume
         Skip traces whose outputs are complete from an earlier run into ``out_dir``.
     chunk_traces
-        Traces per task; default: enough tasks for about four per worker, at most 32 traces.
+        Traces per task; default: enough tasks for about four per worker, at most 32.
     log_level
         Level of the ``mapmatch`` logger inside tasks (``None``: leave it); the per-trace
         distance warnings are in ``summary.csv`` anyway.
@@ -130,6 +145,8 @@ class BatchOptions:
         The column naming the traces of table files (CSV, Parquet ...); default: the usual
         id columns (``trace_id``, ``trip_id``, ``vehicle_id`` ...; see
         :mod:`mapmatch.trace.readers`).
+    crs
+        Frame of the coordinates in the files: ``"wgs84"``, ``"gcj02"`` or ``"bd09"``.
     """
 
     inputs: tuple[str, ...]
@@ -139,163 +156,20 @@ class BatchOptions:
     format: str = "geojson"
     config: MatchConfig = field(default_factory=MatchConfig)
     workers: int | None = None
+    force_workers: bool = False
     scheduler: str | None = None
     scheduler_timeout_s: float = 30.0
     resume: bool = False
     chunk_traces: int | None = None
     log_level: int | None = None
     id_column: str | None = None
+    crs: str = "wgs84"
 
 
-@dataclass(frozen=True, slots=True)
-class ChunkTask:
-    """Work for one task: some traces of one file, and how to match and write them."""
-
-    path: str
-    display: str
-    format: str | None
-    traces: tuple[tuple[int, str, str, int], ...]  # (index, trace_id, output name, points)
-    network: str | None
-    cache_dir: str | None
-    config: MatchConfig
-    out_dir: str
-    out_format: str
-    log_level: int | None
-    id_column: str | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class ChunkOutcome:
-    """What a task sends back: one summary row per trace and its worker's figures."""
-
-    rows: tuple[SummaryRow, ...]
-    host: str
-    pid: int
-    max_rss_kib: int
-    seconds: float
-    cpu_s: float
-
-
-@dataclass(frozen=True, slots=True)
-class BatchReport:
-    """
-    The outcome of a batch.
-
-    Attributes
-    ----------
-    rows
-        Every summary row in input order (resumed ones included).
-    resumed
-        Traces skipped because an earlier run completed them.
-    seconds
-        Wall time of the batch.
-    executor
-        Where the tasks ran (``"2 processes"`` ...).
-    out_dir
-        The output folder.
-    worker_max_rss_kib
-        Peak resident memory of each worker process that ran a task, by ``"host:pid"``.
-    worker_busy_s
-        Seconds each worker process spent in tasks, by ``"host:pid"``.
-    worker_cpu_s
-        CPU seconds each worker process used in tasks (below ``worker_busy_s`` when the
-        machine's cores are shared with other work).
-    """
-
-    rows: tuple[SummaryRow, ...]
-    resumed: int
-    seconds: float
-    executor: str
-    out_dir: Path
-    worker_max_rss_kib: dict[str, int]
-    worker_busy_s: dict[str, float]
-    worker_cpu_s: dict[str, float]
-
-    @property
-    def traces_ok(self) -> int:
-        """Traces matched and written."""
-        return sum(1 for r in self.rows if r.ok)
-
-    @property
-    def traces_failed(self) -> int:
-        """Traces (and unreadable files) that failed."""
-        return sum(1 for r in self.rows if not r.ok)
-
-    @property
-    def points(self) -> int:
-        """Fixes in the traces matched."""
-        return sum(r.points for r in self.rows if r.ok)
-
-    @property
-    def matched_length_m(self) -> float:
-        """Matched road length of all traces, metres."""
-        return float(sum(r.matched_length_m for r in self.rows if r.ok))
-
-    def _ok_sum(self, name: str) -> int:
-        return sum(int(getattr(r, name)) for r in self.rows if r.ok)
-
-    @property
-    def reordered_rows(self) -> int:
-        """Rows sorted into time order, over the matched traces."""
-        return self._ok_sum("reordered_rows")
-
-    @property
-    def merged_rows(self) -> int:
-        """True duplicates merged, over the matched traces."""
-        return self._ok_sum("merged_rows")
-
-    @property
-    def dropped_rows(self) -> int:
-        """Source records the readers could not use, over the matched traces."""
-        return self._ok_sum("dropped_rows")
-
-    @property
-    def shared_time_rows(self) -> int:
-        """Points kept that share the previous point's time, over the matched traces."""
-        return self._ok_sum("shared_time_rows")
-
-    @property
-    def input_rows(self) -> int:
-        """Rows read, over the matched traces."""
-        return self._ok_sum("input_rows")
-
-    @property
-    def time_sources(self) -> dict[str, int]:
-        """Matched traces by what their times were (``ok``, ``absent``, ``implausible``)."""
-        return dict(Counter(r.time for r in self.rows if r.ok).most_common())
-
-    @property
-    def traces_with_warnings(self) -> int:
-        """Matched traces whose validation said something (``warnings`` column)."""
-        return sum(1 for r in self.rows if r.ok and r.warnings)
-
-    @property
-    def verdicts(self) -> dict[str, int]:
-        """Distance-check verdicts of the matched traces, by count."""
-        return dict(Counter(r.verdict for r in self.rows if r.ok).most_common())
-
-    @property
-    def exit_code(self) -> int:
-        """0 when every trace matched, 1 when any trace or file failed."""
-        return 0 if self.traces_failed == 0 else 1
-
-
-class BatchProgress(Protocol):
-    """Told how far the batch is (the command line draws a progress bar)."""
-
-    def start(self, *, total_traces: int, total_points: int, resumed: int) -> None:
-        """The batch knows its size; ``resumed`` traces are done already."""
-
-    def update(self, rows: Sequence[SummaryRow]) -> None:
-        """These traces just finished."""
-
-
-# --------------------------------------------------------------------------- workers
+# --------------------------------------------------------------------------- network
 
 _NETWORKS: dict[tuple[str | None, str | None], roadnets.RoadNetwork] = {}
 _NETWORK_LOCK = threading.Lock()
-_FILE_LOCK = threading.Lock()
-_LAST_FILE: dict[str, tuple[tuple[object, ...], list[Trace | str]]] = {}
 
 
 def worker_network(source: str | None, cache_dir: str | None) -> roadnets.RoadNetwork:
@@ -307,8 +181,7 @@ def worker_network(source: str | None, cache_dir: str | None) -> roadnets.RoadNe
     source
         OSM extract, or ``None`` for the embedded default.
     cache_dir
-        Compiled-network cache; in workers this reads the memory-mapped cache entry the
-        parent wrote.
+        Compiled-network cache.
     """
     key = (source, cache_dir)
     with _NETWORK_LOCK:
@@ -319,143 +192,19 @@ def worker_network(source: str | None, cache_dir: str | None) -> roadnets.RoadNe
         return net
 
 
-def _read_file(
-    path: str, fmt: str | None, display: str, id_column: str | None = None
-) -> list[Trace | str]:
-    """
-    Every trace of a file, or the one-line error of each trace that is invalid.
-
-    The last file read is kept, so the chunks of one file that land on the same worker
-    read it once.
-    """
-    stat = os.stat(path)
-    key = (path, fmt, id_column, stat.st_mtime_ns, stat.st_size)
-    with _FILE_LOCK:
-        cached = _LAST_FILE.get("file")
-        if cached is not None and cached[0] == key:
-            return cached[1]
-    default_id = "stdin" if display == STDIN else None
-    items: list[Trace | str]
-    try:
-        items = list(
-            read_traces(path, format=fmt, default_trace_id=default_id, id_column=id_column)
-        )
-    except InvalidTraceError as exc:
-        # One trace is invalid: read the others one by one so that only it fails.
-        raws = read_raw_traces(path, format=fmt, default_trace_id=default_id, id_column=id_column)
-        items = []
-        for raw in raws:
-            if exc.trace_id is not None and raw.trace_id == exc.trace_id:
-                items.append(error_line(exc))
-                continue
-            try:
-                items.append(trace_from_raw(raw))
-            except Exception as inner:
-                items.append(error_line(inner))
-    with _FILE_LOCK:
-        _LAST_FILE["file"] = (key, items)
-    return items
-
-
-def _max_rss_kib() -> int:
-    try:
-        import resource
-    except ImportError:  # pragma: no cover - Windows
-        return 0
-    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
-
-
-def match_chunk(task: ChunkTask) -> ChunkOutcome:
-    """
-    Match and write the traces of one task; never raises for a bad trace.
-
-    Runs in a worker (or this process): loads the network once per process
-    (:func:`worker_network`), reads the file, and for each trace matches it, writes its
-    outputs atomically and makes its summary row. A trace that fails gets a ``failed`` row
-    with its error's first line.
-
-    Parameters
-    ----------
-    task
-        The file, the traces of it to do, and the options.
-
-    Returns
-    -------
-    ChunkOutcome
-        One row per trace of the task, in task order, and the worker's peak memory.
-    """
-    started = time.perf_counter()
-    cpu_started = time.process_time()
-    if task.log_level is not None:
-        logging.getLogger("mapmatch").setLevel(task.log_level)
-    rows: list[SummaryRow] = []
-    out_dir = Path(task.out_dir)
-    try:
-        net = worker_network(task.network, task.cache_dir)
-        items = _read_file(task.path, task.format, task.display, task.id_column)
-    except Exception as exc:
-        err = error_line(exc)
-        rows = [
-            SummaryRow.failed(
-                source=task.display, error=err, trace_id=tid, index=index, points=points
-            )
-            for index, tid, _name, points in task.traces
-        ]
-        return _outcome(rows, started, cpu_started)
-    for index, tid, name, points in task.traces:
-        t0 = time.perf_counter()
-        try:
-            item = items[index] if index < len(items) else None
-            if isinstance(item, str):
-                rows.append(
-                    SummaryRow.failed(
-                        source=task.display, error=item, trace_id=tid, index=index, points=points
-                    )
-                )
-                continue
-            if item is None or item.trace_id != tid:
-                msg = f"{task.display}: trace {tid!r} is gone; the file changed during the batch"
-                raise BatchInputError(msg)
-            result = match(item, net, task.config)
-            write_result(result, out_dir, name, task.out_format)
-            rows.append(
-                SummaryRow.matched(
-                    result,
-                    source=task.display,
-                    index=index,
-                    output=name,
-                    seconds=time.perf_counter() - t0,
-                )
-            )
-        except Exception as exc:
-            row = SummaryRow.failed(
-                source=task.display, error=error_line(exc), trace_id=tid, index=index, points=points
-            )
-            rows.append(dataclasses.replace(row, seconds=time.perf_counter() - t0))
-    return _outcome(rows, started, cpu_started)
-
-
-def _outcome(rows: list[SummaryRow], started: float, cpu_started: float) -> ChunkOutcome:
-    return ChunkOutcome(
-        rows=tuple(rows),
-        host=socket.gethostname(),
-        pid=os.getpid(),
-        max_rss_kib=_max_rss_kib(),
-        seconds=time.perf_counter() - started,
-        cpu_s=time.process_time() - cpu_started,
-    )
-
-
-# --------------------------------------------------------------------------- parent
+# --------------------------------------------------------------------------- set-up
 
 
 def _fingerprint(options: BatchOptions, net: roadnets.RoadNetwork) -> dict[str, object]:
-    return {
+    out: dict[str, object] = {
         "format": options.format,
         "id_column": options.id_column,
         "network": {"id": net.network_id, "sha256": net.source_sha256},
         "config": {k: _jsonable(v) for k, v in dataclasses.asdict(options.config).items()},
     }
+    if options.crs != "wgs84":  # earlier runs (all WGS84) resume unchanged
+        out["crs"] = options.crs
+    return out
 
 
 def _jsonable(value: object) -> object:
@@ -473,8 +222,8 @@ def _check_manifest(out_dir: Path, fingerprint: dict[str, object], resume: bool)
             theirs = earlier.get("fingerprint") or {}
             differ = sorted(
                 k
-                for k in fingerprint
-                if not isinstance(theirs, dict) or theirs.get(k) != fingerprint[k]
+                for k in set(fingerprint) | set(theirs if isinstance(theirs, dict) else {})
+                if not isinstance(theirs, dict) or theirs.get(k) != fingerprint.get(k)
             )
             msg = (
                 f"--resume: {out_dir} was written with another {', '.join(differ) or 'setup'}; "
@@ -486,12 +235,77 @@ def _check_manifest(out_dir: Path, fingerprint: dict[str, object], resume: bool)
     atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 
+def _usable_out_dir(out_dir: Path) -> None:
+    """Make the output folder and prove it takes a file, or raise one clear BatchError."""
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=out_dir, prefix=".tmp-probe-"):
+            pass
+    except OSError as exc:
+        what = "cannot create" if not out_dir.is_dir() else "cannot write into"
+        msg = (
+            f"{what} the output folder {str(out_dir)!r}: {exc.strerror or exc}; "
+            "give --out a folder you may write to"
+        )
+        raise BatchError(msg) from exc
+
+
+def _worker_count(options: BatchOptions, pending: int) -> tuple[int, list[str]]:
+    """Local worker processes to start, and what the summary should say about it."""
+    cores = available_cores()
+    asked = options.workers if options.workers is not None else cores
+    notes: list[str] = []
+    if asked > cores and not options.force_workers and options.scheduler is None:
+        note = (
+            f"--workers {asked} cut to {cores}, the cores this process may use "
+            "(--force-workers starts them all)"
+        )
+        _log.warning(note)
+        notes.append(note)
+        asked = cores
+    return max(1, min(asked, pending)), notes  # no pool of processes for one trace
+
+
 def _chunk_size(options: BatchOptions, pending: int, slots: int) -> int:
     if options.chunk_traces is not None:
         return max(1, options.chunk_traces)
-    if slots <= 1:
-        return 1
+    if slots <= 1:  # in this process: chunks only pace the summary and the progress bar
+        return _INLINE_CHUNK
     return max(1, min(_MAX_CHUNK, ceil(pending / (slots * _CHUNKS_PER_SLOT))))
+
+
+# --------------------------------------------------------------------------- the run
+
+
+@dataclass
+class _Tally:
+    """What the finished tasks reported, as they come in."""
+
+    log: SummaryLog
+    progress: BatchProgress | None
+    rows: dict[Key, SummaryRow] = field(default_factory=dict)
+    rss: dict[str, int] = field(default_factory=dict)
+    busy: dict[str, float] = field(default_factory=dict)
+    cpu: dict[str, float] = field(default_factory=dict)
+    match_s: float = 0.0
+    warmup_s: float = 0.0
+    retried: int = 0
+
+    def record(self, rows: tuple[SummaryRow, ...] | list[SummaryRow]) -> None:
+        self.log.append(rows)
+        for row in rows:
+            self.rows[row.key] = row
+        if self.progress is not None and rows:
+            self.progress.update(list(rows))
+
+    def outcome(self, outcome: ChunkOutcome) -> None:
+        where = f"{outcome.host}:{outcome.pid}"
+        self.rss[where] = max(self.rss.get(where, 0), outcome.max_rss_kib)
+        self.busy[where] = self.busy.get(where, 0.0) + outcome.seconds
+        self.cpu[where] = self.cpu.get(where, 0.0) + outcome.cpu_s
+        self.match_s += outcome.match_s
+        self.warmup_s += outcome.warmup_s
+        self.record(outcome.rows)
 
 
 def run_batch(
@@ -520,7 +334,8 @@ def run_batch(
     Raises
     ------
     BatchError
-        Unknown format, or ``resume`` into a folder written with other options.
+        Unknown format or frame, an output folder that cannot be made or written, or
+        ``resume`` into a folder written with other options.
     BatchInputError
         An input does not exist or no trace file was found.
     RoadNetworkError
@@ -532,42 +347,36 @@ def run_batch(
     if options.format not in FORMATS:
         msg = f"unknown output format {options.format!r}; use one of {', '.join(FORMATS)}"
         raise BatchError(msg)
+    if options.crs not in SUPPORTED_CRS:
+        msg = f"unknown crs {options.crs!r}; use one of {', '.join(SUPPORTED_CRS)}"
+        raise BatchError(msg)
     out_dir = Path(options.out_dir).resolve()
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        msg = f"cannot create the output folder {str(out_dir)!r}: {exc.strerror or exc}"
-        raise BatchError(msg) from exc
+    _usable_out_dir(out_dir)
     network = str(Path(options.network).resolve()) if options.network else None
     cache_dir = str(Path(options.cache_dir).resolve()) if options.cache_dir else None
     net = worker_network(network, cache_dir)  # compiles into the cache once, here
-    files = discover_inputs(options.inputs, spool_dir=out_dir, stdin=stdin)
+    found = discover_inputs(options.inputs, spool_dir=out_dir, stdin=stdin, out_dir=out_dir)
     _check_manifest(out_dir, _fingerprint(options, net), options.resume)
     remove_temporaries(out_dir)
 
-    scans: list[FileScan] = [scan_file(f, id_column=options.id_column) for f in files]
+    scans: list[FileScan] = [scan_file(f, id_column=options.id_column) for f in found.files]
     names = assign_output_names(
         (scan.file.display, ref.index, ref.trace_id) for scan in scans for ref in scan.traces
     )
     summary_path = out_dir / SUMMARY_NAME
-    done: dict[tuple[str, int, str], SummaryRow] = {}
+    done: dict[Key, SummaryRow] = {}
     if options.resume:
         for row in read_summary(summary_path):
             complete = outputs_complete(out_dir, row.output, options.format)
             if row.ok and names.get(row.key) == row.output and complete:
                 done[row.key] = row
-    log = SummaryLog(summary_path, keep=list(done.values()))
-    new_rows: dict[tuple[str, int, str], SummaryRow] = {}
-    worker_rss: dict[str, int] = {}
-    worker_busy: dict[str, float] = {}
-    worker_cpu: dict[str, float] = {}
+    tally = _Tally(SummaryLog(summary_path, keep=list(done.values())), progress)
     executor = None
+    notes: list[str] = []
     try:
         for scan in scans:
             if scan.error is not None:
-                row = SummaryRow.failed(source=scan.file.display, error=scan.error)
-                new_rows[row.key] = row
-                log.append([row])
+                tally.record([SummaryRow.failed(source=scan.file.display, error=scan.error)])
         pending = [
             (scan, ref)
             for scan in scans
@@ -581,68 +390,117 @@ def run_batch(
                 resumed=len(done),
             )
         if pending:
-            workers = options.workers if options.workers is not None else os.cpu_count() or 1
+            workers, notes = _worker_count(options, len(pending))
             executor = make_executor(
-                min(workers, len(pending)),  # no pool of processes for one trace
+                workers,
                 options.scheduler,
-                preload=["mapmatch.batch"],
+                preload=["mapmatch.batch.tasks", "mapmatch.batch.warm"],
                 timeout_s=options.scheduler_timeout_s,
+                shared=net,
             )
             size = _chunk_size(options, len(pending), executor.slots)
-            tasks = _tasks(pending, names, size, options, out_dir, network, cache_dir)
-            for task, outcome in executor.run(match_chunk, tasks):
+            tasks = _tasks(pending, names, size, options, out_dir)
+            retry = _retry_hook(out_dir, tally)
+            for task, outcome in executor.run(match_chunk, tasks, retry=retry):
                 if isinstance(outcome, BaseException):
-                    err = f"task failed: {error_line(outcome)}"
-                    rows: tuple[SummaryRow, ...] = tuple(
-                        SummaryRow.failed(
-                            source=task.display, error=err, trace_id=tid, index=i, points=n
-                        )
-                        for i, tid, _name, n in task.traces
-                    )
+                    tally.record(_lost(task, outcome, read_journals(out_dir)))
                 else:
-                    rows = outcome.rows
-                    where = f"{outcome.host}:{outcome.pid}"
-                    worker_rss[where] = max(worker_rss.get(where, 0), outcome.max_rss_kib)
-                    worker_busy[where] = worker_busy.get(where, 0.0) + outcome.seconds
-                    worker_cpu[where] = worker_cpu.get(where, 0.0) + outcome.cpu_s
-                log.append(rows)
-                for row in rows:
-                    new_rows[row.key] = row
-                if progress is not None:
-                    progress.update(rows)
+                    tally.outcome(outcome)
     finally:
-        log.close()
+        tally.log.close()
         if executor is not None:
             executor.close()
+        remove_journals(out_dir)
+        remove_temporaries(out_dir)  # what a worker that died was writing
 
     ordered: list[SummaryRow] = []
     for scan in scans:
         if scan.error is not None:
-            ordered.append(new_rows[(scan.file.display, -1, "")])
+            ordered.append(tally.rows[(scan.file.display, -1, "")])
         for ref in scan.traces:
             key = (scan.file.display, ref.index, ref.trace_id)
-            ordered.append(done[key] if key in done else new_rows[key])
+            ordered.append(done[key] if key in done else tally.rows[key])
     write_summary(summary_path, ordered)
+    sync_folder(out_dir)
     return BatchReport(
         rows=tuple(ordered),
         resumed=len(done),
         seconds=time.perf_counter() - started,
         executor=executor.description if executor is not None else "nothing to do",
         out_dir=out_dir,
-        worker_max_rss_kib=worker_rss,
-        worker_busy_s=worker_busy,
-        worker_cpu_s=worker_cpu,
+        worker_max_rss_kib=tally.rss,
+        worker_busy_s=tally.busy,
+        worker_cpu_s=tally.cpu,
+        match_s=tally.match_s,
+        warmup_s=tally.warmup_s,
+        points_now=sum(r.points for k, r in tally.rows.items() if r.ok and k not in done),
+        skipped_inputs=found.skipped,
+        retried=tally.retried,
+        notes=tuple(notes),
     )
+
+
+def _retry_hook(out_dir: Path, tally: _Tally) -> Callable[[ChunkTask], list[ChunkTask]]:
+    """
+    What to run again of a task whose worker died: its traces not in a worker's journal.
+
+    The journalled ones (matched and written, or failed on their own) are recorded at once,
+    as they are; the rest become one task each, so a trace that kills its worker again
+    takes no other with it.
+    """
+
+    def retry(task: ChunkTask) -> list[ChunkTask]:
+        journal = read_journals(out_dir)
+        finished, again = _split(task, journal)
+        tally.record(finished)
+        tally.retried += len(again)
+        return task.only(again)
+
+    return retry
+
+
+def _split(task: ChunkTask, journal: dict[Key, SummaryRow]) -> tuple[list[SummaryRow], set[int]]:
+    """The journalled rows of a task's traces, and the indices of the others."""
+    finished: list[SummaryRow] = []
+    again: set[int] = set()
+    for index, tid, name, _points in task.traces:
+        row = journal.get((task.display, index, tid))
+        written = row is not None and (
+            not row.ok or outputs_complete(Path(task.out_dir), name, task.out_format)
+        )
+        if row is not None and written:
+            finished.append(row)
+        else:
+            again.add(index)
+    return finished, again
+
+
+def _lost(
+    task: ChunkTask, error: BaseException, journal: dict[Key, SummaryRow]
+) -> list[SummaryRow]:
+    """Rows of a task that ended without its outcome: journalled rows, else failures."""
+    finished, lost = _split(task, journal)
+    why = "worker lost" if isinstance(error, WorkerLostError) else "task failed"
+    failed = [
+        SummaryRow.failed(
+            source=task.display,
+            error=f"{why}: {error_line(error)}",
+            trace_id=tid,
+            index=i,
+            points=n,
+        )
+        for i, tid, _name, n in task.traces
+        if i in lost
+    ]
+    return finished + failed
 
 
 def _tasks(
     pending: list[tuple[FileScan, TraceRef]],
-    names: dict[tuple[str, int, str], str],
+    names: dict[Key, str],
     size: int,
     options: BatchOptions,
     out_dir: Path,
-    network: str | None,
-    cache_dir: str | None,
 ) -> list[ChunkTask]:
     by_file: dict[str, tuple[FileScan, list[tuple[int, str, str, int]]]] = {}
     for scan, ref in pending:
@@ -658,13 +516,12 @@ def _tasks(
                     display=scan.file.display,
                     format=scan.file.format,
                     traces=tuple(traces[start : start + size]),
-                    network=network,
-                    cache_dir=cache_dir,
                     config=options.config,
                     out_dir=str(out_dir),
                     out_format=options.format,
                     log_level=options.log_level,
                     id_column=options.id_column,
+                    crs=options.crs,
                 )
             )
     return tasks

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 from mapmatch.batch import BatchOptions, BatchReport, run_batch
 from mapmatch.batch.outputs import FORMATS, SUMMARY_NAME
 from mapmatch.config import MatchConfig, add_config_flags, config_from_flags
+from mapmatch.trace import SUPPORTED_CRS
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -95,7 +96,8 @@ def add_parser(subparsers: argparse._SubParsersAction[Any]) -> argparse.Argument
         type=_positive_int,
         default=None,
         metavar="N",
-        help="local worker processes (default: one per core; 1 runs in this process)",
+        help="local worker processes (default: one per core; 1 runs in this process; more "
+        "than the cores are cut to the cores unless --force-workers)",
     )
     where.add_argument(
         "--scheduler",
@@ -103,6 +105,18 @@ def add_parser(subparsers: argparse._SubParsersAction[Any]) -> argparse.Argument
         default=None,
         help="run on an existing Dask cluster, e.g. tcp://host:8786 (workers must see "
         "the same files)",
+    )
+    p.add_argument(
+        "--force-workers",
+        action="store_true",
+        help="start --workers processes even when there are fewer cores",
+    )
+    p.add_argument(
+        "--crs",
+        choices=SUPPORTED_CRS,
+        default="wgs84",
+        help="frame of the coordinates in the files: wgs84 (default), or gcj02 / bd09 from "
+        "Chinese map SDKs (converted to WGS84)",
     )
     p.add_argument(
         "--scheduler-timeout-s",
@@ -184,17 +198,34 @@ class _Bar:
             self._bar.close()
 
 
+def _time_line(report: BatchReport) -> str:
+    """Wall time, and points/s over the time spent matching only (not loading, not waiting)."""
+    if report.nothing_to_do:
+        return (
+            f"time      {report.seconds:.2f} s; nothing to do: every trace was complete from "
+            "an earlier run"
+        )
+    rate = report.points_per_s
+    if rate != rate:  # NaN: no trace matched in this run
+        return f"time      {report.seconds:.2f} s on {report.executor}; no trace matched"
+    warm = f" after {report.warmup_s:.2f} s of kernel warm-up" if report.warmup_s >= 0.005 else ""
+    return (
+        f"time      {report.seconds:.2f} s on {report.executor}; matching {report.match_s:.2f} s "
+        f"of worker time{warm}: {rate:,.0f} points/s per worker"
+    )
+
+
 def _human_summary(report: BatchReport) -> str:
     rows = report.rows
     files = len({r.source for r in rows})
     failed = [r for r in rows if not r.ok]
-    rate = report.points / report.seconds if report.seconds > 0 else 0.0
     verdicts = ", ".join(f"{k} {v}" for k, v in report.verdicts.items()) or "none"
     resumed = f" ({report.resumed} from an earlier run)" if report.resumed else ""
     sources = report.time_sources
     untimed = sum(v for k, v in sources.items() if k != "ok")
     times = ", ".join(f"{k} {v}" for k, v in sources.items()) or "none"
-    lines = [
+    lines = [f"note      {note}" for note in report.notes]
+    lines += [
         f"traces    {report.traces_ok} ok, {len(failed)} failed, from {files} file(s){resumed}",
         f"points    {report.points:,} matched traces' points",
         f"rows      {report.input_rows:,} read: {report.reordered_rows:,} reordered, "
@@ -204,9 +235,18 @@ def _human_summary(report: BatchReport) -> str:
         f"warnings  {report.traces_with_warnings} trace(s) with warnings (see {SUMMARY_NAME})",
         f"length    {report.matched_length_m / 1000:,.3f} km matched",
         f"verdicts  {verdicts}",
-        f"time      {report.seconds:.2f} s, {rate:,.0f} points/s on {report.executor}",
+        _time_line(report),
         f"output    {report.out_dir} ({SUMMARY_NAME})",
     ]
+    if report.skipped_inputs:
+        lines.append(
+            f"skipped   {len(report.skipped_inputs)} file(s) in output folders, not read as "
+            f"traces (first: {report.skipped_inputs[0]})"
+        )
+    if report.retried:
+        lines.append(
+            f"retried   {report.retried} trace(s) in a fresh pool after a worker process died"
+        )
     for r in failed[:_SHOW_FAILED]:
         what = f"{r.source} trace {r.trace_id!r}" if r.trace_id else r.source
         lines.append(f"failed    {what}: {r.error}")
@@ -232,12 +272,14 @@ def run(args: argparse.Namespace) -> int:
         format=args.format,
         config=config,
         workers=args.workers,
+        force_workers=args.force_workers,
         scheduler=args.scheduler,
         scheduler_timeout_s=args.scheduler_timeout_s,
         resume=args.resume,
         chunk_traces=args.chunk_traces,
         log_level=logging.WARNING if verbose else logging.ERROR,
         id_column=args.id_column,
+        crs=args.crs,
     )
     show_bar = not args.quiet and sys.stderr.isatty()
     bar = _Bar() if show_bar else None
