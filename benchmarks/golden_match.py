@@ -3,9 +3,10 @@
     .venv/bin/python benchmarks/golden_match.py --write [--out .bench/golden.pkl]
     .venv/bin/python benchmarks/golden_match.py --check [--out .bench/golden.pkl] [--show 10]
 
-``--write`` simulates ~330 traces on six extracts (three shared ones, three of tests/data) in
-five conditions (1 s / 5 m, 15 s / 10 m, 30 s / 20 m with 2 % outliers of 40 m; realistic 1 s
-and 15 s) and four input classes (positions, + accuracy, + heading & speed, + odometer), plus
+``--write`` simulates 528 traces on six extracts (three shared ones, three of tests/data) in
+eight conditions (1 s / 5 m, 15 s / 10 m, 30 s / 20 m with 2 % outliers of 40 m; realistic 1 s,
+15 s and 30 s; 60 s / 20 m with 5 % outliers; 5 s / 15 m with 10 % outliers of 80 m) and four
+input classes (positions, + accuracy, + heading & speed, + odometer), plus
 2-point and 30-point slices and traces without times; it stores the traces' columns (so that a
 change to the simulator does not change the check) and, per trace, what the match says: each
 segment's edges with their start and end offsets, the matched length, every fix's edge, offset,
@@ -62,6 +63,14 @@ def conditions() -> dict[str, SimulationConfig]:
         "30s-20m": SimulationConfig(interval_s=30.0, noise_m=20.0, **plain),
         "realistic-1s": SimulationConfig.realistic(interval_s=1.0, route_length_m=3000.0),
         "realistic-15s": SimulationConfig.realistic(interval_s=15.0, route_length_m=3000.0),
+        # harder: sparse, very noisy, many outliers (breaks, repairs, jumps, loops)
+        "60s-20m": SimulationConfig(
+            interval_s=60.0, noise_m=20.0, **{**plain, "outlier_rate": 0.05}
+        ),
+        "realistic-30s": SimulationConfig.realistic(interval_s=30.0, route_length_m=3000.0),
+        "noisy-5s": SimulationConfig(
+            interval_s=5.0, noise_m=15.0, outlier_rate=0.1, outlier_m=80.0, route_length_m=3000.0
+        ),
     }
 
 

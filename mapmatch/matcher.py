@@ -28,7 +28,7 @@ from mapmatch.hmm.fixes import (
     with_sigma,
 )
 from mapmatch.hmm.selection import find_displaced
-from mapmatch.hmm.trellis import cuts, isolated, repair_breaks, solve
+from mapmatch.hmm.trellis import model_fixes, repair_breaks, solve
 from mapmatch.result import Diagnostics, MatchResult, MatchStats, Segment
 from mapmatch.trace import check_match_inputs
 
@@ -39,6 +39,9 @@ if TYPE_CHECKING:
     from roadnets import RoadNetwork
 
 __all__ = ["match"]
+
+#: The configuration of a match called without one (frozen: shared).
+_DEFAULT = MatchConfig()
 
 
 def match(
@@ -79,7 +82,7 @@ def match(
         ``trace`` is not a :class:`Trace` or ``net`` not a :class:`~roadnets.RoadNetwork`.
     """
     check_match_inputs(trace, net)
-    config = config or MatchConfig()
+    config = config or _DEFAULT
     timings: dict[str, float] = {}
     clock = time.perf_counter()
 
@@ -96,15 +99,10 @@ def match(
         raise NoCandidatesError(trace.trace_id, float(fixes.radius_m.max()))
     clock = _lap(timings, "candidates", clock)
 
-    has_cands = cands.counts > 0
     outlier = find_displaced(fixes, obs, cands, config)
-    lonely = isolated(~has_cands)
-    used = np.flatnonzero(has_cands & ~outlier)
     # a stretch of fixes with no road nearby (not a lone stray fix), and the start of a new
     # segment of the trace file (a GPX trkseg), split the trace
-    segment = np.searchsorted(trace.segment_starts, obs.first, side="right")
-    missing_before = np.cumsum(~has_cands & ~lonely, dtype=np.int64) + segment
-    cut_after = cuts(used, missing_before)
+    used, missing_before, cut_after = model_fixes(cands, outlier, fixes.segment_starts, obs.first)
     clock = _lap(timings, "selection", clock)
 
     solution = solve(net, obs, cands, used, cut_after, config)

@@ -25,12 +25,15 @@ import numpy.typing as npt
 from numba import njit
 
 __all__ = [
+    "find_record",
     "find_records",
     "gather",
     "group_pairs",
     "new_group_scratch",
     "new_workspace",
+    "route_pairs_kernel",
     "search_many",
+    "table_records",
 ]
 
 
@@ -339,25 +342,110 @@ def search_many(  # type: ignore[no-untyped-def]  # pragma: no cover
 
 
 @njit(cache=True, nogil=True)
+def find_record(ptr, state, order, rank, wanted):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Record of state ``wanted`` in block ``rank`` (-1: no such record, or ``rank < 0``)."""
+    if rank < 0:
+        return -1
+    lo, hi = ptr[rank], ptr[rank + 1]
+    end = hi
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if state[order[mid]] < wanted:
+            lo = mid + 1
+        else:
+            hi = mid
+    if lo < end and state[order[lo]] == wanted:
+        return order[lo]
+    return -1
+
+
+@njit(cache=True, nogil=True)
 def find_records(ptr, state, order, rank, wanted):  # type: ignore[no-untyped-def]  # pragma: no cover
     """Record of state ``wanted[i]`` in block ``rank[i]`` (-1: no such record or rank)."""
     out = np.full(len(wanted), -1, dtype=np.int64)
     for i in range(len(wanted)):
-        r = rank[i]
-        if r < 0:
-            continue
-        lo, hi = ptr[r], ptr[r + 1]
-        end = hi
-        w = wanted[i]
-        while lo < hi:
-            mid = (lo + hi) >> 1
-            if state[order[mid]] < w:
-                lo = mid + 1
-            else:
-                hi = mid
-        if lo < end and state[order[lo]] == w:
-            out[i] = order[lo]
+        out[i] = find_record(ptr, state, order, rank[i], wanted[i])
     return out
+
+
+@njit(cache=True, nogil=True)
+def table_records(sources, ptr, state, order, copy_ptr, copy_state, from_edge, to_edge):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    Record of the best route of each ``(from, to)`` pair in a table (-1: none).
+
+    The record of ``to``'s own state, or of a restricted copy of it reached with a lower key
+    (records of one source are in settling order, which is key order).
+    """
+    n = len(from_edge)
+    out = np.full(n, -1, dtype=np.int64)
+    for i in range(n):
+        a, b = from_edge[i], to_edge[i]
+        rank = np.searchsorted(sources, a)
+        if rank >= len(sources) or sources[rank] != a:
+            continue
+        best = find_record(ptr, state, order, rank, b)
+        for c in range(copy_ptr[b], copy_ptr[b + 1]):
+            found = find_record(ptr, state, order, rank, copy_state[c])
+            if found >= 0 and (best < 0 or found < best):
+                best = found
+        out[i] = best
+    return out
+
+
+@njit(cache=True, nogil=True)
+def route_pairs_kernel(graph, from_edge, to_edge, bounds, uturn_cost, ws, scratch):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    The best route of each ``(from, to)`` pair: :func:`group_pairs`, then :func:`search_many`.
+
+    ``graph`` holds :func:`search_many`'s first ten arguments
+    (:func:`roadnets.routes.search_graph`).
+
+    Returns the searches (``sources, source bounds, ptr, state, distance, time, U-turns,
+    predecessor``), their targets (``target_ptr, target_edge, target_rec``) and per pair its
+    record, length, time and U-turns (``inf, inf, 0`` where there is none).
+    """
+    src, src_bound, target_ptr, target_edge, pair_target = group_pairs(
+        from_edge, to_edge, bounds, scratch
+    )
+    trans_ptr, trans_to, state_edge, plain, edge_v, edge_twin, edge_len, edge_time = graph[:8]
+    edge_key, trans_key = graph[8], graph[9]
+    ptr, state, dist, time, turns, pred, target_rec = search_many(
+        trans_ptr,
+        trans_to,
+        state_edge,
+        plain,
+        edge_v,
+        edge_twin,
+        edge_len,
+        edge_time,
+        edge_key,
+        trans_key,
+        src,
+        src_bound,
+        uturn_cost,
+        target_ptr,
+        target_edge,
+        ws,
+    )
+    rec = target_rec[pair_target]
+    pair_dist, pair_time, pair_turns = gather(rec, dist, time, turns)
+    return (
+        src,
+        src_bound,
+        ptr,
+        state,
+        dist,
+        time,
+        turns,
+        pred,
+        target_ptr,
+        target_edge,
+        target_rec,
+        rec,
+        pair_dist,
+        pair_time,
+        pair_turns,
+    )
 
 
 @njit(cache=True, nogil=True)

@@ -38,12 +38,12 @@ import numpy as np
 import numpy.typing as npt
 
 from roadnets.route_search import (
-    find_records,
     gather,
-    group_pairs,
     new_group_scratch,
     new_workspace,
+    route_pairs_kernel,
     search_many,
+    table_records,
 )
 from roadnets.turns import DEFAULT_UTURN_COST_M
 
@@ -51,7 +51,16 @@ if TYPE_CHECKING:
     from roadnets.arrays import NetworkArrays
     from roadnets.turns import TurnGraph
 
-__all__ = ["DEFAULT_UTURN_COST_M", "EdgeRoutes", "RouteTable", "route_pairs", "route_table"]
+__all__ = [
+    "DEFAULT_UTURN_COST_M",
+    "EdgeRoutes",
+    "RouteTable",
+    "edge_routes_of",
+    "route_pairs",
+    "route_table",
+    "scratch",
+    "search_graph",
+]
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -116,25 +125,11 @@ class RouteTable:
         "None" means unreachable within the source's bound, or (``complete`` false) not
         settled before the source's own targets were.
         """
-        a = np.asarray(from_edges, dtype=np.int64).ravel()
-        b = np.asarray(to_edges, dtype=np.int64).ravel()
-        order = self._order()
-        rank = np.searchsorted(self.sources, a)
-        rank_c = np.minimum(rank, max(len(self.sources) - 1, 0))
-        has_source = rank < len(self.sources)
-        if len(self.sources):
-            has_source &= self.sources[rank_c] == a
-        rank_c = np.where(has_source, rank_c, -1)
-        best = find_records(self.ptr, self.state, order, rank_c, b)
-        lo, hi = self.turns.copy_ptr[b], self.turns.copy_ptr[b + 1]
-        with_copies = np.flatnonzero(has_source & (hi > lo))
-        for j in range(int((hi - lo).max()) if len(with_copies) else 0):
-            sub = with_copies[lo[with_copies] + j < hi[with_copies]]
-            state = self.turns.copy_state[lo[sub] + j].astype(np.int64)
-            found = find_records(self.ptr, self.state, order, rank_c[sub], state)
-            # records of one source are in settling order, which is key order
-            better = (found >= 0) & ((best[sub] < 0) | (found < best[sub]))
-            best[sub[better]] = found[better]
+        a = np.ascontiguousarray(from_edges, dtype=np.int64).ravel()
+        b = np.ascontiguousarray(to_edges, dtype=np.int64).ravel()
+        turns = self.turns
+        args = (self.sources, self.ptr, self.state, self._order())
+        best = table_records(*args, turns.copy_ptr, turns.copy_state, a, b)
         return np.asarray(best, dtype=np.int64)
 
     def lookup(
@@ -295,15 +290,19 @@ def scratch(
     the largest network searched; a search leaves it clean, so it is reused by every later
     search instead of allocating and clearing arrays of the network's size each time.
     """
+    last = getattr(_local, "last", None)
+    if last is not None and last[0] is turns and last[1] is arrays:
+        found: tuple[tuple[npt.NDArray[Any], ...], tuple[npt.NDArray[np.int64], ...]] = last[2]
+        return found
     need = (turns.n_states, arrays.n_nodes, arrays.n_edges, len(turns.trans_to), _max_out(turns))
     held = getattr(_local, "scratch", None)
-    if held is not None and all(n <= h for n, h in zip(need, held[0], strict=True)):
-        return held[1], held[2]
-    sizes = need if held is None else tuple(max(n, h) for n, h in zip(need, held[0], strict=True))
-    search_ws = new_workspace(*sizes)
-    group_ws = new_group_scratch(sizes[2])
-    _local.scratch = (sizes, search_ws, group_ws)
-    return search_ws, group_ws
+    if held is None or any(n > h for n, h in zip(need, held[0], strict=True)):
+        sizes = (
+            need if held is None else tuple(max(n, h) for n, h in zip(need, held[0], strict=True))
+        )
+        held = _local.scratch = (sizes, new_workspace(*sizes), new_group_scratch(sizes[2]))
+    _local.last = (turns, arrays, (held[1], held[2]))  # the network searched last
+    return held[1], held[2]
 
 
 #: Most transitions out of one state, per turn graph (by identity).
@@ -327,50 +326,48 @@ def _gather(table: RouteTable, rec: IntArray) -> tuple[FloatArray, FloatArray, I
     return dist, time, turns
 
 
-def _search(
+def _search_arrays(
     arrays: NetworkArrays,
     turns: TurnGraph,
-    sources: IntArray,
-    bounds: FloatArray,
     cost: tuple[float, FloatArray | None, FloatArray | None],
-    target_ptr: IntArray,
-    target_edge: IntArray,
-) -> tuple[RouteTable, IntArray]:
+) -> tuple[tuple[npt.NDArray[Any], ...], float]:
+    """The ten network arrays a search reads, for these costs, and the U-turn cost (checked)."""
     uturn_cost_m, edge_cost, turn_cost = cost
     if not np.isfinite(uturn_cost_m) or uturn_cost_m < 0:
         msg = f"uturn_cost_m = {uturn_cost_m!r}: give a finite cost >= 0"
         raise ValueError(msg)
+    graph = search_graph(arrays, turns)
+    if edge_cost is None and turn_cost is None:
+        return graph, float(uturn_cost_m)
     edge_key = _costs(edge_cost, arrays.n_edges, "edge_cost", arrays.edge_length_m)
     trans_key = _costs(turn_cost, len(turns.trans_to), "turn_cost", np.zeros(0))
     # the pruning at junctions assumes a U-turn is the only move with a cost of its own
     plain = turns.plain if turn_cost is None else np.zeros(turns.n_states, dtype=np.bool_)
-    graph = search_graph(arrays, turns)
-    args = (
-        *graph[:3],
-        plain,
-        *graph[4:8],
-        edge_key,
-        trans_key,
-        sources,
-        bounds,
-        float(uturn_cost_m),
-        target_ptr,
-        target_edge,
-        scratch(arrays, turns)[0],
-    )
-    ptr, state, dist, time, uturns, pred, target_rec = search_many(*args)
+    return (*graph[:3], plain, *graph[4:8], edge_key, trans_key), float(uturn_cost_m)
+
+
+def _table(
+    turns: TurnGraph,
+    cost: tuple[float, FloatArray | None, FloatArray | None],
+    sources: IntArray,
+    bounds: FloatArray,
+    complete: bool,
+    records: tuple[npt.NDArray[Any], ...],
+) -> RouteTable:
+    """The :class:`RouteTable` of searches' records ``(ptr, state, dist, time, U-turns, pred)``."""
+    ptr, state, dist, time, uturns, pred = records
     if len(state) >= 2**31:
         msg = (
             f"{len(state):,} route records do not fit one table; search fewer sources or "
             "with a smaller bound at a time"
         )
         raise MemoryError(msg)
-    table = RouteTable(
+    return RouteTable(
         sources=sources,
         bounds_m=bounds,
-        complete=len(target_edge) == 0,
-        uturn_cost_m=float(uturn_cost_m),
-        weighted=edge_cost is not None or turn_cost is not None,
+        complete=complete,
+        uturn_cost_m=float(cost[0]),
+        weighted=cost[1] is not None or cost[2] is not None,
         ptr=ptr,
         state=state,
         distance_m=dist,
@@ -379,7 +376,6 @@ def _search(
         pred=pred.astype(np.int32),
         turns=turns,
     )
-    return table, target_rec
 
 
 def _costs(given: FloatArray | None, size: int, name: str, default: FloatArray) -> FloatArray:
@@ -444,17 +440,14 @@ def route_table(
     src, bounds = src[order], bounds[order]
     first = np.ones(len(src), dtype=bool)
     first[1:] = src[1:] != src[:-1]
-    empty = np.zeros(len(src[first]) + 1, dtype=np.int64)
-    table, _ = _search(
-        arrays,
-        turns,
-        src[first],
-        np.ascontiguousarray(bounds[first]),
-        (uturn_cost_m, edge_cost, turn_cost),
-        empty,
-        np.zeros(0, dtype=np.int64),
-    )
-    return table
+    sources, bounds = src[first], np.ascontiguousarray(bounds[first])
+    cost = (uturn_cost_m, edge_cost, turn_cost)
+    graph, uturn = _search_arrays(arrays, turns, cost)
+    empty = np.zeros(len(sources) + 1, dtype=np.int64)
+    nothing = np.zeros(0, dtype=np.int64)
+    args = (*graph, sources, bounds, uturn, empty, nothing, scratch(arrays, turns)[0])
+    *records, _ = search_many(*args)
+    return _table(turns, cost, sources, bounds, True, tuple(records))
 
 
 def route_pairs(
@@ -504,10 +497,24 @@ def route_pairs(
     if table is not None:
         rec = table.records(a, b)
         return EdgeRoutes(a, b, *_gather(table, rec), rec, table)
-    src, src_bound, target_ptr, target_edge, pair_target = group_pairs(
-        a, b, np.ascontiguousarray(bounds), scratch(arrays, turns)[1]
-    )
     cost = (uturn_cost_m, edge_cost, turn_cost)
-    found, target_rec = _search(arrays, turns, src, src_bound, cost, target_ptr, target_edge)
-    rec = target_rec[pair_target]
-    return EdgeRoutes(a, b, *_gather(found, rec), rec, found, (target_ptr, target_edge, target_rec))
+    graph, uturn = _search_arrays(arrays, turns, cost)
+    out = route_pairs_kernel(
+        graph, a, b, np.ascontiguousarray(bounds), uturn, *scratch(arrays, turns)
+    )
+    return edge_routes_of(turns, cost, a, b, out)
+
+
+def edge_routes_of(
+    turns: TurnGraph,
+    cost: tuple[float, FloatArray | None, FloatArray | None],
+    from_edges: IntArray,
+    to_edges: IntArray,
+    found: tuple[npt.NDArray[Any], ...],
+) -> EdgeRoutes:
+    """The :class:`EdgeRoutes` of what :func:`~roadnets.route_search.route_pairs_kernel` found."""
+    src, src_bound, *records = found[:8]
+    target_ptr, target_edge, target_rec, rec, dist, time, uturns = found[8:]
+    table = _table(turns, cost, src, src_bound, len(target_edge) == 0, tuple(records))
+    targets = (target_ptr, target_edge, target_rec)
+    return EdgeRoutes(from_edges, to_edges, dist, time, uturns, rec, table, targets)

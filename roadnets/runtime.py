@@ -87,14 +87,16 @@ class KernelWarmup:
 
 
 def _dispatchers() -> list[object]:
-    from roadnets import route_search, routing
+    """The kernels called from Python (the others are compiled into them)."""
+    from roadnets import route_search, routing, spatial_kernels
 
     return [
         routing._bounded_dijkstra_many,
         route_search.search_many,
-        route_search.find_records,
-        route_search.group_pairs,
+        route_search.route_pairs_kernel,
+        route_search.table_records,
         route_search.gather,
+        spatial_kernels.nearby_kernel,
     ]
 
 

@@ -21,23 +21,22 @@ import numpy as np
 from numba import njit
 
 from mapmatch.hmm.loops import collapse_loops
-from mapmatch.hmm.routes import ROUTE_SAME_EDGE, ROUTE_STANDSTILL, ROUTE_UTURN
+from mapmatch.hmm.observations import travel_arrays
+from mapmatch.hmm.pathwalk import point_on_edge, project_kernel, stretch_vertices, walk_pieces
+from mapmatch.hmm.transition import route_inputs
 from mapmatch.result import MatchedPoints, Segment
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
+    from typing import Any
 
     from mapmatch.config import MatchConfig
     from mapmatch.hmm.observations import Observations
     from mapmatch.hmm.solution import Solution
     from mapmatch.trace import Trace
-    from mapmatch.types import BoolArray, FloatArray, IntArray
+    from mapmatch.types import BoolArray, FloatArray
     from roadnets import RoadNetwork
 
-__all__ = ["Assembled", "assemble"]
-
-
-_EPS_M = 1e-6
+__all__ = ["Assembled", "assemble", "geometry"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -50,351 +49,153 @@ class Assembled:
     loops: int  # loops the fixes did not support, taken out
 
 
-@dataclass(frozen=True, slots=True)
-class _PiecePath:
-    edge: IntArray
-    start_m: FloatArray
-    end_m: FloatArray
-    along_m: FloatArray  # distance along the path of each used fix of the piece
-    jumps: int
-    loops: int  # loops taken out (:mod:`mapmatch.hmm.loops`)
+def geometry(net: RoadNetwork) -> tuple[Any, ...]:
+    """``(edge_len, geom_ptr, geom_x, geom_y, geom_cum, vertex_pos)`` for the path kernels."""
+    a = net.arrays
+    vertex_pos = net._vertex_position
+    return (a.edge_length_m, a.edge_geom_ptr, a.geom_x, a.geom_y, a.geom_cum_m, vertex_pos)
 
 
 @njit(cache=True, nogil=True)
-def _project_kernel(px, py, lo, hi, vx, vy, va):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """Nearest point of a polyline (vertices ``vx, vy`` at distances ``va``) within [lo, hi]."""
-    n = len(px)
-    along = np.empty(n)
-    dist = np.empty(n)
-    nv = len(va)
-    for i in range(n):
-        best_d = np.inf
-        best_a = lo[i]
-        k0 = max(np.searchsorted(va, lo[i], side="right") - 1, 0)
-        k1 = min(np.searchsorted(va, hi[i], side="left"), nv - 1)
-        if nv == 1 or k0 >= k1:
-            k = min(k0, nv - 1)
-            best_a = min(max(va[k], lo[i]), hi[i])
-            best_d = np.hypot(px[i] - vx[k], py[i] - vy[k])
-        for k in range(k0, k1):
-            seg = va[k + 1] - va[k]
-            ax, ay = vx[k], vy[k]
-            dx, dy = vx[k + 1] - ax, vy[k + 1] - ay
-            d2 = dx * dx + dy * dy
-            t = ((px[i] - ax) * dx + (py[i] - ay) * dy) / d2 if d2 > 0 and seg > 0 else 0.0
-            a = va[k] + min(max(t, 0.0), 1.0) * seg
-            a = min(max(a, lo[i]), hi[i])
-            f = (a - va[k]) / seg if seg > 0 else 0.0
-            qx, qy = ax + f * dx, ay + f * dy
-            d = np.hypot(px[i] - qx, py[i] - qy)
-            if d < best_d:
-                best_d = d
-                best_a = a
-        along[i] = best_a
-        dist[i] = best_d
-    return along, dist
-
-
-def _stretch_vertices(
-    net: RoadNetwork, edge: IntArray, start_m: FloatArray, end_m: FloatArray
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Vertices of a path of edge stretches with their distance along the path (metres)."""
-    a = net.arrays
-    sizes = a.edge_geom_ptr[edge + 1] - a.edge_geom_ptr[edge]
-    owner = np.repeat(np.arange(len(edge)), sizes)
-    vertex = np.repeat(a.edge_geom_ptr[edge] - np.cumsum(sizes) + sizes, sizes) + np.arange(
-        int(sizes.sum())
-    )
-    offset = a.geom_cum_m[vertex]
-    inner = (offset > start_m[owner]) & (offset < end_m[owner])
-    base = np.concatenate(([0.0], np.cumsum(end_m - start_m)[:-1]))
+def _locate(edge, start_m, end_m, along):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Edge and offset at a distance along a path of stretches."""
     n = len(edge)
-    ends_x, ends_y = net.point_on_edge(
-        np.concatenate((edge, edge)), np.concatenate((start_m, end_m))
-    )
-    x = np.concatenate((ends_x[:n], a.geom_x[vertex[inner]], ends_x[n:]))
-    y = np.concatenate((ends_y[:n], a.geom_y[vertex[inner]], ends_y[n:]))
-    along = np.concatenate(
-        (base, base[owner[inner]] + offset[inner] - start_m[owner[inner]], base + end_m - start_m)
-    )
-    order = np.argsort(along, kind="stable")
-    return x[order], y[order], along[order]
+    acc = 0.0
+    for i in range(n):
+        driven = end_m[i] - start_m[i]
+        acc += driven
+        if along <= acc or i == n - 1:
+            before = acc - driven
+            return edge[i], min(max(start_m[i] + (along - before), start_m[i]), end_m[i])
+    return -1, np.nan
 
 
-def _project_onto(
-    vertices: tuple[FloatArray, FloatArray, FloatArray],
-    px: FloatArray,
-    py: FloatArray,
-    lo: FloatArray,
-    hi: FloatArray,
-) -> tuple[FloatArray, FloatArray]:
-    """Distance along a polyline of the nearest point to each ``(px, py)`` within [lo, hi]."""
-    vx, vy, va = vertices
-    along, dist = _project_kernel(
-        np.ascontiguousarray(px, dtype=np.float64),
-        np.ascontiguousarray(py, dtype=np.float64),
-        np.ascontiguousarray(lo, dtype=np.float64),
-        np.ascontiguousarray(hi, dtype=np.float64),
-        vx,
-        vy,
-        va,
-    )
-    return np.asarray(along, dtype=np.float64), np.asarray(dist, dtype=np.float64)
+@njit(cache=True, nogil=True)
+def _place(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    walked, pieces, obs, fix, post, thinning, geom, ids
+):
+    """
+    The pieces' paths trimmed at their ends, and every fix placed on them.
 
-
-def _farthest_reached(
-    net: RoadNetwork, edge: int, from_m: float, x: FloatArray, y: FloatArray, radius_m: FloatArray
-) -> float:
-    """Farthest offset along ``edge`` (beyond ``from_m``) that fixes within their radius reach."""
-    if len(x) == 0:
-        return from_m
-    length = float(net.arrays.edge_length_m[edge])
-    vertices = _stretch_vertices(
-        net, np.array([edge], dtype=np.int64), np.array([0.0]), np.array([length])
-    )
-    along, dist = _project_onto(vertices, x, y, np.full(len(x), from_m), np.full(len(x), length))
-    near = dist <= radius_m
-    return float(along[near].max()) if near.any() else from_m
-
-
-def _route_pieces(
-    net: RoadNetwork,
-    solution: Solution,
-    t: int,
-    frontier: list[float],
-    fixes_between: tuple[FloatArray, FloatArray, FloatArray],
-    travel_m: float,
-    dt_s: float,
-    hold_limit_m: float,
-) -> list[list[float]]:
-    """Edge stretches ``[edge, start, end]`` of the move from used fix ``t`` to ``t + 1``."""
-    arrays = net.arrays
-    edge_len = arrays.edge_length_m
-    cands, states = solution.cands, solution.states
-    ra, rb = cands.ptr[t] + states[t], cands.ptr[t + 1] + states[t + 1]
-    ea, eb = int(cands.edge[ra]), int(cands.edge[rb])
-    oa, ob = float(cands.offset_m[ra]), float(cands.offset_m[rb])
-    move = solution.kinds[t, states[t], states[t + 1]]
-    if move == ROUTE_STANDSTILL:
-        return []
-    if move == ROUTE_SAME_EDGE:
-        return [[ea, oa, ob]]
-    if move == ROUTE_UTURN:
-        length = float(edge_len[ea])
-        turn = max(oa, length - ob)
-        if int(frontier[0]) == ea:
-            turn = max(turn, frontier[2])
-        turn = max(turn, _farthest_reached(net, ea, turn, *fixes_between))
-        node = int(arrays.edge_v[ea])
-        to_end = (length - oa) + ob  # out to the end and back to b
-        timed_reach = float(arrays.edge_speed_mps[ea]) * dt_s  # NaN without times
-        if np.isfinite(travel_m):  # out to the turn and back covers the distance travelled
-            turn = max(turn, 0.5 * (travel_m + oa + length - ob))
-            timed_reach = np.nan  # the travel says where it turned
-        if arrays.out_ptr[node + 1] - arrays.out_ptr[node] <= 1 and (
-            length - turn <= 0.5 * hold_limit_m or to_end <= timed_reach
-        ):
-            # a dead end is driven to its end, where there is room to turn, unless the
-            # time between the fixes is too short to get there and back at its speed limit
-            turn = length
-        turn = min(turn, length)
-        return [[ea, oa, turn], [eb, length - turn, ob]]
-    via = solution.routes.edges(ea, eb)
+    ``walked`` is ``(row_ptr, edge, lo, hi, along)`` of :func:`walk_pieces` (after the loops
+    were priced), ``pieces`` ``(starts, stops, used)``, ``obs`` the observations' ``(first,
+    stop, of_fix, stray, sigma)``, ``fix`` every fix's ``(x, y, radius, outlier)``, ``post``
+    the chosen candidate's posterior per used observation, ``ids`` ``(node_osm_id, edge_u,
+    edge_v, edge_key)``. Returns the trimmed rows ``(row_ptr, edge, lo, hi)``, each piece's
+    first and last fix, and per fix ``(matched, in_model, edge, offset, confidence,
+    segment, x, y, distance, u, v, key)`` (the position at edge 0 for unmatched fixes).
+    """
+    row_ptr, w_edge, w_lo, w_hi, along_all = walked
+    p_lo, p_hi, used = pieces
+    o_first, o_stop, of_fix, stray, o_sigma = obs
+    fx, fy, fradius, outlier = fix
+    node_osm, edge_u, edge_v, edge_key = ids
+    n = len(fx)
+    n_pieces = len(p_lo)
+    matched = np.zeros(n, dtype=np.bool_)
+    in_model = np.zeros(n, dtype=np.bool_)
+    f_edge = np.full(n, -1, dtype=np.int64)
+    f_off = np.full(n, np.nan)
+    confidence = np.zeros(n)
+    segment_of = np.full(n, -1, dtype=np.int64)
+    t_ptr = np.zeros(n_pieces + 1, dtype=np.int64)
+    t_edge = np.empty(len(w_edge), dtype=np.int64)
+    t_lo = np.empty(len(w_edge))
+    t_hi = np.empty(len(w_edge))
+    first_fix = np.empty(n_pieces, dtype=np.int64)
+    last_fix = np.empty(n_pieces, dtype=np.int64)
+    m = 0
+    for p in range(n_pieces):
+        start, stop = p_lo[p], p_hi[p]
+        size = stop - start
+        r0, r1 = row_ptr[p], row_ptr[p + 1]
+        along = along_all[start:stop].copy()
+        # an end fix within the observations' resolution (thinning_sigmas x sigma) of a
+        # junction cannot tell which side of it the car was: the path ends at the junction
+        low = np.inf
+        for k in range(start, stop):
+            low = min(low, o_sigma[used[k]])
+        reach = thinning * low
+        if r1 - r0 > 1 and w_hi[r1 - 1] - w_lo[r1 - 1] < reach:
+            cut = w_hi[r1 - 1] - w_lo[r1 - 1]
+            r1 -= 1
+            top = along.max() - cut
+            for k in range(size):
+                along[k] = min(along[k], top)
+        if r1 - r0 > 1 and w_hi[r0] - w_lo[r0] < reach:
+            cut = w_hi[r0] - w_lo[r0]
+            r0 += 1
+            for k in range(size):
+                along[k] = max(along[k] - cut, 0.0)
+        count = r1 - r0
+        t_edge[m : m + count] = w_edge[r0:r1]
+        t_lo[m : m + count] = w_lo[r0:r1]
+        t_hi[m : m + count] = w_hi[r0:r1]
+        path_e, path_lo, path_hi = t_edge[m : m + count], t_lo[m : m + count], t_hi[m : m + count]
+        m += count
+        t_ptr[p + 1] = m
+        piece_obs = used[start:stop]
+        first, last = o_first[piece_obs[0]], o_stop[piece_obs[-1]] - 1
+        first_fix[p], last_fix[p] = first, last
+        lo, hi = first, last  # outliers just before or after the piece join it
+        while lo > 0 and outlier[lo - 1] and segment_of[lo - 1] < 0:
+            lo -= 1
+        while hi < n - 1 and outlier[hi + 1]:
+            hi += 1
+        k_fix = hi + 1 - lo
+        before = np.empty(k_fix)
+        after = np.empty(k_fix)
+        slots = np.empty(k_fix, dtype=np.int64)
+        for j in range(k_fix):
+            own = of_fix[lo + j]
+            slot = np.searchsorted(piece_obs, own)  # the observation at or after the fix
+            slots[j] = slot
+            is_used = piece_obs[min(max(slot, 0), size - 1)] == own
+            before[j] = along[slot - 1] if slot > 0 else 0.0
+            after_slot = slot + 1 if is_used else slot
+            after[j] = along[min(after_slot, size - 1)] if after_slot < size else along[size - 1]
+        vx, vy, va = stretch_vertices(path_e, path_lo, path_hi, geom)
+        placed, dist = project_kernel(fx[lo : hi + 1], fy[lo : hi + 1], before, after, vx, vy, va)
+        for j in range(k_fix):
+            f = lo + j
+            own = of_fix[f]
+            slot = slots[j]
+            at = min(max(slot, 0), size - 1)
+            is_used = piece_obs[at] == own
+            member = is_used and not stray[f]
+            a = placed[j]
+            if is_used and o_stop[own] - o_first[own] == 1:
+                a = along[at]  # a fix that is an observation of its own sits where the model put it
+            near = member or dist[j] <= fradius[f]
+            f_edge[f], f_off[f] = _locate(path_e, path_lo, path_hi, a)
+            neighbour = min(max(slot, 1), max(size - 1, 1))
+            lower = min(post[start + neighbour - 1], post[start + min(neighbour, size - 1)])
+            confidence[f] = post[start + at] if member else lower
+            matched[f] = near
+            in_model[f] = member
+            segment_of[f] = p if near else -1
+    px = np.empty(n)
+    py = np.empty(n)
+    distance = np.full(n, np.nan)
+    u = np.full(n, -1, dtype=np.int64)
+    v = np.full(n, -1, dtype=np.int64)
+    key = np.full(n, -1, dtype=np.int64)
+    for f in range(n):
+        e = f_edge[f] if matched[f] else 0
+        px[f], py[f] = point_on_edge(e, f_off[f] if matched[f] else 0.0, *geom)
+        if matched[f]:
+            distance[f] = np.hypot(px[f] - fx[f], py[f] - fy[f])
+            u[f], v[f], key[f] = node_osm[edge_u[e]], node_osm[edge_v[e]], edge_key[e]
+            confidence[f] = min(max(confidence[f], 0.0), 1.0)
+        else:
+            f_edge[f] = -1
+            f_off[f] = np.nan
+            confidence[f] = 0.0
     return (
-        [[ea, oa, float(edge_len[ea])]]
-        + [[float(e), 0.0, float(edge_len[e])] for e in via]
-        + [[eb, 0.0, ob]]
-    )
-
-
-def _continue_from(
-    net: RoadNetwork,
-    frontier: list[float],
-    pieces: list[list[float]],
-    behind: Callable[[int, float], bool],
-) -> tuple[bool, list[list[float]]] | None:
-    """
-    The part of a move beyond the path's front, or ``None`` when the move never passes it.
-
-    The front is a place on an edge; at the edge's start or end it is also the node there,
-    which a move may pass on other edges. Returns whether the front's own (empty) stretch is
-    to be dropped (the move leaves the front's node on another edge) and the stretches to
-    add, the first of which continues the front's; ``[]`` when the move ends behind the front
-    (``behind(edge, offset)``): the car holds.
-    """
-    arrays = net.arrays
-    edge, front = int(frontier[0]), frontier[2]
-    at_start = front <= _EPS_M and frontier[1] <= _EPS_M
-    at_end = front >= arrays.edge_length_m[edge] - _EPS_M
-    for k, (e, start, end) in enumerate(pieces):
-        ek = int(e)
-        if ek == edge and start - _EPS_M <= front <= end + _EPS_M:
-            return False, [[e, front, max(front, end)], *pieces[k + 1 :]]
-        if at_end and start <= _EPS_M and arrays.edge_u[ek] == arrays.edge_v[edge]:
-            return False, [[edge, front, front], *pieces[k:]]
-        if (
-            at_start
-            and end >= arrays.edge_length_m[ek] - _EPS_M
-            and arrays.edge_v[ek] == arrays.edge_u[edge]
-        ):
-            return True, pieces[k + 1 :]
-    last = pieces[-1]
-    if behind(int(last[0]), last[2]):
-        return False, []
-    return None
-
-
-def _behind_front(
-    net: RoadNetwork, frontier: list[float], limit_m: float
-) -> Callable[[int, float], bool]:
-    """Whether a place lies at most ``limit_m`` behind the path's front along the road."""
-    arrays = net.arrays
-    front_edge, front = int(frontier[0]), frontier[2]
-
-    def behind(edge: int, offset: float) -> bool:
-        if edge == front_edge:
-            return offset <= front + _EPS_M
-        ahead = arrays.edge_length_m[edge] - offset + front
-        if ahead > limit_m:
-            return False
-        one = np.array([edge], dtype=np.int64), np.array([front_edge], dtype=np.int64)
-        mid = float(net.edge_routes(*one, limit_m - ahead).distance_m[0])
-        return bool(ahead + mid <= limit_m)
-
-    return behind
-
-
-def _retract(entries: list[list[float]], done: float, start: list[float], limit_m: float) -> float:
-    """
-    Cut the path back to where a move starts, if that place is on it; the new ``done``.
-
-    A move that starts behind the path's front and turns off before reaching it shows that
-    the stretch beyond its start came from a scattered fix: the car never drove it.
-    """
-    edge, offset = int(start[0]), start[1]
-    cut = 0.0  # length of path beyond the place looked at
-    for k in range(len(entries) - 1, -1, -1):
-        e, lo, hi = entries[k]
-        if int(e) == edge and lo - _EPS_M <= offset <= hi + _EPS_M:
-            if cut + hi - offset > limit_m:
-                break
-            del entries[k + 1 :]
-            entries[k][2] = max(lo, offset)
-            return float(sum(hi_ - lo_ for _, lo_, hi_ in entries[:-1]))
-        cut += hi - lo
-        if cut > limit_m:
-            break
-    return done
-
-
-def _piece_path(
-    net: RoadNetwork,
-    obs: Observations,
-    solution: Solution,
-    start: int,
-    stop: int,
-    x: FloatArray,
-    y: FloatArray,
-    radius_m: FloatArray,
-    hold_limit_m: float,
-    config: MatchConfig,
-) -> _PiecePath:
-    """Edges driven between the chosen candidates of used fixes ``start..stop-1``."""
-    cands, states, used = solution.cands, solution.states, solution.used
-    piece_obs = used[start:stop]
-    travel = np.full(max(len(piece_obs) - 1, 0), np.nan)
-    if obs.travel is not None:  # only where it says something: an odometer, dense speeds
-        distance, slack = obs.travel.between(piece_obs)
-        with np.errstate(invalid="ignore"):
-            travel = np.where(slack <= 0.25 * distance, distance, np.nan)
-    first = cands.ptr[start] + states[start]
-    offset0 = float(cands.offset_m[first])
-    entries: list[list[float]] = [[float(cands.edge[first]), offset0, offset0]]
-    done = 0.0  # length of the entries before the last one
-    along = [0.0]
-    jumps = 0
-    for t in range(start, stop - 1):
-        between = slice(int(obs.first[used[t]]), int(obs.stop[used[t + 1]]))
-        pieces = _route_pieces(
-            net,
-            solution,
-            t,
-            entries[-1],
-            (x[between], y[between], radius_m[between]),
-            float(travel[t - start]),
-            float(obs.time_s[used[t + 1]] - obs.time_s[used[t]]),
-            hold_limit_m,
-        )
-        if pieces:
-            behind = _behind_front(net, entries[-1], hold_limit_m)
-            found = _continue_from(net, entries[-1], pieces, behind)
-            if found is None:  # the move starts behind the front and turns off before it
-                done = _retract(entries, done, pieces[0], hold_limit_m)
-                found = _continue_from(net, entries[-1], pieces, behind)
-            if found is None:  # nowhere on the path: drawn as a jump
-                jumps += 1
-                found = False, [entries[-1][:], *pieces]
-            drop, tail = found
-            if drop and tail:  # leave the front's node on another edge
-                if len(entries) > 1:
-                    entries.pop()
-                    done -= entries[-1][2] - entries[-1][1]
-                    tail = [entries[-1][:], *tail]
-                else:
-                    entries[0] = tail[0][:]
-            if tail:
-                entries[-1][2] = tail[0][2]
-                for entry in tail[1:]:
-                    done += entries[-1][2] - entries[-1][1]
-                    entries.append(entry)
-        last = entries[-1]
-        along.append(done + last[2] - last[1])
-    entries, along_m, loops = collapse_loops(
-        net, obs, solution, start, entries, np.array(along, dtype=np.float64), config
-    )
-    # an end fix within the observations' resolution (thinning_sigmas x sigma) of a junction
-    # cannot tell which side of it the car was: the path starts and ends at the junction
-    reach = config.thinning_sigmas * float(obs.sigma_m[used[start:stop]].min())
-    entries, along_m = _trim_ends(entries, along_m, reach)
-    table = np.array(entries, dtype=np.float64).reshape(-1, 3)
-    return _PiecePath(table[:, 0].astype(np.int64), table[:, 1], table[:, 2], along_m, jumps, loops)
-
-
-def _trim_ends(
-    entries: list[list[float]], along_m: FloatArray, reach_m: float
-) -> tuple[list[list[float]], FloatArray]:
-    """
-    Drop a sliver of a next (or previous) edge at either end of a path.
-
-    A first or last fix a metre past a junction cannot be told from the junction itself:
-    a stretch shorter than ``reach_m`` at an end of the path, on an edge of its own, is taken
-    as the junction, so the path neither starts nor ends on a road it never
-    drove along.
-    """
-    if len(entries) > 1 and entries[-1][2] - entries[-1][1] < reach_m:
-        cut = entries[-1][2] - entries[-1][1]
-        entries = entries[:-1]
-        along_m = np.minimum(along_m, along_m.max() - cut)
-    if len(entries) > 1 and entries[0][2] - entries[0][1] < reach_m:
-        cut = entries[0][2] - entries[0][1]
-        entries = entries[1:]
-        along_m = np.maximum(along_m - cut, 0.0)
-    return entries, along_m
-
-
-def _segment(net: RoadNetwork, index: int, first: int, last: int, path: _PiecePath) -> Segment:
-    # attributes and geometry are read from the network when a result is serialised
-    return Segment(index, first, last, path.edge, path.start_m, path.end_m, net=net)
-
-
-def _locate(path: _PiecePath, along_m: FloatArray) -> tuple[IntArray, FloatArray]:
-    """Edge and offset at distances along a piece's path."""
-    driven = path.end_m - path.start_m
-    cum_end = np.cumsum(driven)
-    i = np.minimum(np.searchsorted(cum_end, along_m, side="left"), len(driven) - 1)
-    before = cum_end[i] - driven[i]
-    offset = np.clip(path.start_m[i] + (along_m - before), path.start_m[i], path.end_m[i])
-    return path.edge[i], offset
+        (t_ptr, t_edge[:m], t_lo[:m], t_hi[:m]),
+        first_fix, last_fix,
+        (matched, in_model, f_edge, f_off, confidence, segment_of, px, py, distance, u, v, key),
+    )  # fmt: skip
 
 
 def assemble(
@@ -420,63 +221,53 @@ def assemble(
     stays unmatched, as do fixes outside every piece. Fixes that entered the model have their
     observation's confidence, the others the lower of their neighbours'.
     """
-    n = len(x)
-    matched = np.zeros(n, dtype=bool)
-    in_model = np.zeros(n, dtype=bool)
-    edge = np.full(n, -1, dtype=np.int64)
-    offset = np.full(n, np.nan)
-    confidence = np.zeros(n)
-    segment_of = np.full(n, -1, dtype=np.int64)
-    segments: list[Segment] = []
-    jumps = loops = 0
-    used, states = solution.used, solution.states
-    post = solution.post[np.arange(len(used)), np.maximum(states, 0)]
-    for index, (start, stop) in enumerate(solution.pieces):
-        path = _piece_path(net, obs, solution, start, stop, x, y, radius_m, hold_limit_m, config)
-        jumps += path.jumps
-        loops += path.loops
-        piece_obs = used[start:stop]
-        first, last = int(obs.first[piece_obs[0]]), int(obs.stop[piece_obs[-1]]) - 1
-        segments.append(_segment(net, index, first, last, path))
-        lo, hi = first, last  # outliers just before or after the piece join it
-        while lo > 0 and outlier[lo - 1] and segment_of[lo - 1] < 0:
-            lo -= 1
-        while hi < n - 1 and outlier[hi + 1]:
-            hi += 1
-        fixes = np.arange(lo, hi + 1)
-        own = obs.of_fix[fixes]
-        slot = np.searchsorted(piece_obs, own)  # the piece's observation at or after each fix
-        at = np.clip(slot, 0, len(piece_obs) - 1)
-        is_used = piece_obs[at] == own
-        member = is_used & ~obs.stray[fixes]
-        last_along = path.along_m[-1]
-        before = np.where(slot > 0, path.along_m[np.clip(slot - 1, 0, None)], 0.0)
-        after_slot = np.where(is_used, slot + 1, slot)
-        after = np.where(
-            after_slot < len(piece_obs),
-            path.along_m[np.clip(after_slot, 0, len(piece_obs) - 1)],
-            last_along,
+    a = net.arrays
+    c, used, states = solution.cands, solution.used, solution.states
+    geom = geometry(net)
+    f8 = np.float64
+    x = np.ascontiguousarray(x, f8)
+    y = np.ascontiguousarray(y, f8)
+    radius = np.ascontiguousarray(radius_m, f8)
+    p_lo = np.array([start for start, _ in solution.pieces], dtype=np.int64)
+    p_hi = np.array([stop for _, stop in solution.pieces], dtype=np.int64)
+    routes = solution.routes
+    walked = walk_pieces(
+        (c.ptr, c.edge, c.offset_m, states, solution.kinds, p_lo, p_hi, used,
+         routes.record, routes.table.state, routes.table.pred),
+        (obs.first, obs.stop, np.ascontiguousarray(obs.time_s, f8)),
+        (x, y, radius),
+        travel_arrays(obs.travel),
+        (a.edge_length_m, a.edge_speed_mps, a.edge_u, a.edge_v, a.edge_twin, a.out_ptr,
+         net.turns.state_edge, geom),
+        route_inputs(net),
+        float(hold_limit_m),
+    )  # fmt: skip
+    row_ptr, w_edge, w_lo, w_hi, along, jumps, may_loop = walked
+    loops = 0
+    if may_loop.any():  # priced in Python: only a path that passes a place twice gets here
+        row_ptr, w_edge, w_lo, w_hi, along, loops = _collapse(
+            net, obs, solution, config, p_lo, p_hi, (row_ptr, w_edge, w_lo, w_hi, along), may_loop
         )
-        vertices = _stretch_vertices(net, path.edge, path.start_m, path.end_m)
-        along, dist = _project_onto(vertices, x[fixes], y[fixes], before, after)
-        # a fix that is an observation of its own sits where the model put it
-        alone = is_used & (obs.stop[own] - obs.first[own] == 1)
-        along = np.where(alone, path.along_m[at], along)
-        near = member | (dist <= radius_m[fixes])
-        edge[fixes], offset[fixes] = _locate(path, along)
-        conf = post[start:stop]
-        neighbour = np.clip(slot, 1, max(len(piece_obs) - 1, 1))
-        lower = np.minimum(conf[neighbour - 1], conf[np.minimum(neighbour, len(conf) - 1)])
-        confidence[fixes] = np.where(member, conf[at], lower)
-        matched[fixes] = near
-        in_model[fixes] = member
-        segment_of[fixes] = np.where(near, index, -1)
-    safe = np.where(matched, edge, 0)
-    px, py = net.point_on_edge(safe, np.where(matched, offset, 0.0))
+    chosen = solution.post[np.arange(len(used)), np.maximum(states, 0)]
+    placed = _place(
+        (row_ptr, w_edge, w_lo, w_hi, along),
+        (p_lo, p_hi, used),
+        (obs.first, obs.stop, obs.of_fix, obs.stray, np.ascontiguousarray(obs.sigma_m, f8)),
+        (x, y, radius, np.ascontiguousarray(outlier, np.bool_)),
+        np.ascontiguousarray(chosen, f8),
+        float(config.thinning_sigmas),
+        geom,
+        (a.node_osm_id, a.edge_u, a.edge_v, a.edge_key),
+    )
+    (t_ptr, t_edge, t_lo, t_hi), first_fix, last_fix, per_fix = placed
+    matched, in_model, edge, offset, confidence, segment_of, px, py, distance, u, v, key = per_fix
+    segments = [
+        Segment(
+            p, int(first_fix[p]), int(last_fix[p]), t_edge[lo:hi], t_lo[lo:hi], t_hi[lo:hi], net=net
+        )
+        for p, (lo, hi) in enumerate(zip(t_ptr[:-1].tolist(), t_ptr[1:].tolist(), strict=True))
+    ]
     lon, lat = net.unproject(px, py)
-    u, v, key = net.edge_osm_ids(safe)
-    nan = np.full(n, np.nan)
-    edge = np.where(matched, edge, -1)
     return Assembled(
         segments=segments,
         points=MatchedPoints(
@@ -485,18 +276,61 @@ def assemble(
             raw_lat=trace.lat,
             matched=matched,
             edge=edge,
-            u=np.where(matched, u, -1),
-            v=np.where(matched, v, -1),
-            key=np.where(matched, key, -1).astype(np.int64),
-            offset_m=np.where(matched, offset, nan),
-            distance_m=np.where(matched, np.hypot(px - x, py - y), nan),
-            lon=np.where(matched, lon, nan),
-            lat=np.where(matched, lat, nan),
-            confidence=np.where(matched, np.clip(confidence, 0.0, 1.0), 0.0),
+            u=u,
+            v=v,
+            key=key,
+            offset_m=offset,
+            distance_m=distance,
+            lon=np.where(matched, lon, np.nan),
+            lat=np.where(matched, lat, np.nan),
+            confidence=confidence,
             segment=segment_of,
             interpolated=matched & ~in_model,
-            outlier=outlier,
+            outlier=np.asarray(outlier, dtype=bool),
         ),
-        jumps=jumps,
+        jumps=int(jumps.sum()),
         loops=loops,
+    )
+
+
+def _collapse(
+    net: RoadNetwork,
+    obs: Observations,
+    solution: Solution,
+    config: MatchConfig,
+    p_lo: Any,
+    p_hi: Any,
+    walked: tuple[Any, ...],
+    may_loop: Any,
+) -> tuple[Any, ...]:
+    """The walked paths with the loops :func:`collapse_loops` takes out of the flagged pieces."""
+    row_ptr, w_edge, w_lo, w_hi, along = walked
+    along = along.copy()
+    edges, los, his = [], [], []
+    loops = 0
+    for p in range(len(p_lo)):
+        lo, hi = int(row_ptr[p]), int(row_ptr[p + 1])
+        e, l0, h0 = w_edge[lo:hi], w_lo[lo:hi], w_hi[lo:hi]
+        if may_loop[p]:
+            start, stop = int(p_lo[p]), int(p_hi[p])
+            entries = [[int(k), float(s), float(t)] for k, s, t in zip(e, l0, h0, strict=True)]
+            entries, along_p, removed = collapse_loops(
+                net, obs, solution, start, entries, along[start:stop], config
+            )
+            loops += removed
+            along[start:stop] = along_p
+            table = np.array(entries, dtype=np.float64).reshape(-1, 3)
+            e, l0, h0 = table[:, 0].astype(np.int64), table[:, 1], table[:, 2]
+        edges.append(e)
+        los.append(l0)
+        his.append(h0)
+    sizes = np.array([len(e) for e in edges], dtype=np.int64)
+    ptr = np.concatenate(([0], np.cumsum(sizes))).astype(np.int64)
+    return (
+        ptr,
+        np.concatenate(edges).astype(np.int64),
+        np.concatenate(los).astype(np.float64),
+        np.concatenate(his).astype(np.float64),
+        along,
+        loops,
     )

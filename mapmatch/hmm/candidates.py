@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 
 from roadnets.spatial import PLACE_SEPARATION_M, bearings, packed_arrays
 from roadnets.spatial_kernels import nearby_kernel
@@ -16,7 +17,7 @@ if TYPE_CHECKING:
     from mapmatch.types import FloatArray, IntArray
     from roadnets import RoadNetwork
 
-__all__ = ["Candidates", "find_candidates", "search_radii"]
+__all__ = ["Candidates", "find_candidates", "search_radii", "sigma_radius_kernel"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -113,6 +114,20 @@ class Candidates:
         )
 
 
+@njit(cache=True, nogil=True)
+def sigma_radius_kernel(n, accuracy, sigma_m, radius_m, factor, max_radius):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Each fix's sigma and search radius (``accuracy`` empty: none reported)."""
+    big = np.finfo(np.float64).max
+    sigma = np.full(n, sigma_m)
+    radius = np.full(n, radius_m)
+    for i in range(len(accuracy)):
+        a = accuracy[i]
+        sigma[i] = np.fmax(sigma_m, a)
+        wide = (0.0 if np.isnan(a) else (big if a == np.inf else a)) * factor  # nan_to_num
+        radius[i] = min(max(radius_m, wide), max_radius)
+    return sigma, radius
+
+
 def search_radii(accuracy_m: FloatArray | None, n: int, config: MatchConfig) -> FloatArray:
     """
     Search radius of each fix: the configured one, widened for fixes with a poor accuracy.
@@ -123,11 +138,16 @@ def search_radii(accuracy_m: FloatArray | None, n: int, config: MatchConfig) -> 
     >>> search_radii(np.array([3.0, 20.0, np.nan, 500.0]), 4, MatchConfig())
     array([ 50.,  80.,  50., 200.])
     """
-    radius = np.full(n, config.search_radius_m)
-    if accuracy_m is not None:
-        wide = np.nan_to_num(accuracy_m, nan=0.0) * config.radius_accuracy_factor
-        radius = np.minimum(np.maximum(radius, wide), config.max_search_radius_m)
-    return radius
+    accuracy = np.empty(0) if accuracy_m is None else np.ascontiguousarray(accuracy_m, np.float64)
+    _, radius = sigma_radius_kernel(
+        n,
+        accuracy,
+        float(config.sigma_m),
+        float(config.search_radius_m),
+        float(config.radius_accuracy_factor),
+        float(config.max_search_radius_m),
+    )
+    return np.asarray(radius, dtype=np.float64)
 
 
 def find_candidates(

@@ -3,13 +3,27 @@
 Gaussian in the distance (Newson & Krumm), floored so that an outlier cannot veto the true
 road; plus a Gaussian on the angle between the reported heading and the road direction whose
 weight rises with speed (reference paper, section 6, eq. 23).
+
+The scores are compiled functions of one candidate (:func:`distance_score`,
+:func:`heading_score`, :func:`speed_weight`) that the trellis kernel calls; the functions
+below apply them to arrays.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numba import njit
+
+from mapmatch.hmm.params import (
+    P_HEADING_FULL_SPEED,
+    P_HEADING_MAX_PENALTY,
+    P_HEADING_MIN_SPEED,
+    P_HEADING_SIGMA,
+    P_MAX_EMISSION_PENALTY,
+    model_params,
+)
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -17,7 +31,20 @@ if TYPE_CHECKING:
     from mapmatch.hmm.observations import Observations
     from mapmatch.types import FloatArray, IntArray
 
-__all__ = ["distance_emission", "emissions", "heading_weight", "log_emission", "log_heading"]
+__all__ = [
+    "distance_emission",
+    "distance_score",
+    "emissions",
+    "emissions_kernel",
+    "flat_arrays",
+    "heading_score",
+    "heading_weight",
+    "log_emission",
+    "log_heading",
+    "speed_weight",
+]
+
+_LOGE2 = float(np.log(2.0))
 
 
 def log_emission(distance_m: FloatArray, *, sigma_m: FloatArray | float) -> FloatArray:
@@ -42,14 +69,92 @@ def log_emission(distance_m: FloatArray, *, sigma_m: FloatArray | float) -> Floa
     return -0.5 * (distance_m / sigma_m) ** 2
 
 
+@njit(cache=True, nogil=True)
+def _logaddexp(x, y):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """``np.logaddexp`` of two values (numpy's algorithm)."""
+    if x == y:
+        return x + _LOGE2
+    tmp = x - y
+    if tmp > 0:
+        return x + np.log1p(np.exp(-tmp))
+    if tmp <= 0:
+        return y + np.log1p(np.exp(tmp))
+    return tmp
+
+
+@njit(cache=True, nogil=True)
+def distance_score(distance, sigma, params):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Gaussian log emission of a distance, floored at ``-max_emission_penalty``."""
+    em = -0.5 * (distance / sigma) ** 2
+    floor = params[P_MAX_EMISSION_PENALTY]
+    if floor > 0:
+        em = _logaddexp(em, -floor)
+    return em
+
+
+@njit(cache=True, nogil=True)
+def speed_weight(speed, params):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """How much the heading counts at ``speed`` (0 when unknown)."""
+    lo, hi = params[P_HEADING_MIN_SPEED], params[P_HEADING_FULL_SPEED]
+    weight = (speed - lo) / (hi - lo)
+    if np.isnan(weight):
+        return 0.0
+    return min(max(weight, 0.0), 1.0)
+
+
+@njit(cache=True, nogil=True)
+def angle_between(a, b):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """Absolute difference of two directions, degrees in [0, 180] (NaN when one is NaN)."""
+    return abs((a - b + 180.0) % 360.0 - 180.0)
+
+
+@njit(cache=True, nogil=True)
+def heading_score(heading, bearing, weight, params):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Weighted log-likelihood of the heading given the road direction (0 when unknown)."""
+    diff = angle_between(heading, bearing)
+    score = -0.5 * (diff / params[P_HEADING_SIGMA]) ** 2
+    floor = -params[P_HEADING_MAX_PENALTY]
+    if not np.isnan(score) and score < floor:
+        score = floor
+    value = weight * score
+    return 0.0 if np.isnan(value) else value
+
+
+@njit(cache=True, nogil=True)
+def emissions_kernel(distance, sigma, heading, bearing, weight, params):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Log emission of each candidate (``heading`` empty: no heading term)."""
+    n = len(distance)
+    em = np.empty(n)
+    for k in range(n):
+        em[k] = distance_score(distance[k], sigma[k], params)
+        if len(heading):
+            em[k] += heading_score(heading[k], bearing[k], weight[k], params)
+    return em
+
+
+def flat_arrays(*values: Any) -> tuple[tuple[int, ...], list[FloatArray]]:
+    """The values broadcast together: their shape, and each as a new flat float array."""
+    arrays = [np.asarray(v, dtype=np.float64) for v in values]
+    shape = np.broadcast_shapes(*(a.shape for a in arrays))
+    return shape, [np.array(np.broadcast_to(a, shape), dtype=np.float64).ravel() for a in arrays]
+
+
 def distance_emission(
     distance_m: FloatArray, sigma_m: FloatArray, config: MatchConfig
 ) -> FloatArray:
     """Gaussian log emission of a distance to the road, floored at ``-max_emission_penalty``."""
-    em = log_emission(distance_m, sigma_m=sigma_m)
-    if config.max_emission_penalty > 0:
-        em = np.logaddexp(em, -config.max_emission_penalty)
-    return em
+    shape, (d, sigma) = flat_arrays(distance_m, sigma_m)
+    none = np.empty(0)
+    em = emissions_kernel(d, sigma, none, none, none, model_params(config))
+    return np.asarray(em, dtype=np.float64).reshape(shape)
+
+
+@njit(cache=True, nogil=True)
+def _weights(speed, params):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    out = np.empty(len(speed))
+    for i in range(len(speed)):
+        out[i] = speed_weight(speed[i], params)
+    return out
 
 
 def heading_weight(speed_mps: FloatArray, config: MatchConfig) -> FloatArray:
@@ -62,9 +167,17 @@ def heading_weight(speed_mps: FloatArray, config: MatchConfig) -> FloatArray:
     >>> heading_weight(np.array([0.0, 5.5, 20.0, np.nan]), MatchConfig())
     array([0. , 0.5, 1. , 0. ])
     """
-    lo, hi = config.heading_min_speed_mps, config.heading_full_speed_mps
-    weight = np.clip((speed_mps - lo) / (hi - lo), 0.0, 1.0)
-    return np.nan_to_num(weight, nan=0.0)
+    speed = np.ascontiguousarray(speed_mps, dtype=np.float64)
+    out = _weights(speed.ravel(), model_params(config))
+    return np.asarray(out, dtype=np.float64).reshape(speed.shape)
+
+
+@njit(cache=True, nogil=True)
+def _headings(heading, bearing, weight, params):  # type: ignore[no-untyped-def]  # pragma: no cover
+    out = np.empty(len(heading))
+    for i in range(len(heading)):
+        out[i] = heading_score(heading[i], bearing[i], weight[i], params)
+    return out
 
 
 def log_heading(
@@ -82,17 +195,27 @@ def log_heading(
     >>> log_heading(np.array([90.0, 90.0]), np.array([90.0, 270.0]), np.ones(2), MatchConfig())
     array([ -0., -12.])
     """
-    diff = np.abs((heading_deg - bearing_deg + 180.0) % 360.0 - 180.0)
-    score = np.maximum(-0.5 * (diff / config.heading_sigma_deg) ** 2, -config.heading_max_penalty)
-    return np.nan_to_num(weight * score, nan=0.0)
+    shape, flat = flat_arrays(heading_deg, bearing_deg, weight)
+    out = _headings(*flat, model_params(config))  # type: ignore[call-arg]
+    return np.asarray(out, dtype=np.float64).reshape(shape)
 
 
 def emissions(
     fixes: Observations, cands: Candidates, fix_of: IntArray, config: MatchConfig
 ) -> FloatArray:
     """Log emission of every candidate: distance to the road, and heading when known."""
-    em = distance_emission(cands.distance_m, fixes.sigma_m[fix_of], config)
+    params = model_params(config)
+    none = np.empty(0)
+    heading = weight = none
     if fixes.heading_deg is not None:
-        weight = heading_weight(fixes.speed_mps, config)
-        em += log_heading(fixes.heading_deg[fix_of], cands.bearing_deg, weight[fix_of], config)
-    return em
+        heading = np.ascontiguousarray(fixes.heading_deg[fix_of], dtype=np.float64)
+        weight = _weights(np.ascontiguousarray(fixes.speed_mps, np.float64), params)[fix_of]
+    em = emissions_kernel(
+        np.ascontiguousarray(cands.distance_m, np.float64),
+        np.ascontiguousarray(fixes.sigma_m[fix_of], np.float64),
+        heading,
+        np.ascontiguousarray(cands.bearing_deg, np.float64),
+        np.ascontiguousarray(weight, np.float64),
+        params,
+    )
+    return np.asarray(em, dtype=np.float64)

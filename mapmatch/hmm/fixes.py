@@ -15,8 +15,9 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numba import njit
 
-from mapmatch.hmm.candidates import Candidates, find_candidates, search_radii
+from mapmatch.hmm.candidates import Candidates, find_candidates, sigma_radius_kernel
 from mapmatch.hmm.observations import Observations, Travel, merge_fixes
 
 if TYPE_CHECKING:
@@ -60,26 +61,126 @@ class Fixes:
 def fixes_of(trace: Trace, x: FloatArray, y: FloatArray, config: MatchConfig) -> Fixes:
     """The model inputs of every fix: position sigma, search radius, speed and travel."""
     n = len(x)
-    radius = search_radii(trace.accuracy_m, n, config)
-    sigma = np.full(n, config.sigma_m)
-    if trace.accuracy_m is not None:
-        sigma = np.fmax(sigma, trace.accuracy_m)
+    f8 = np.float64
+    none = np.empty(0)
+    accuracy = none if trace.accuracy_m is None else np.ascontiguousarray(trace.accuracy_m, f8)
     time_s = trace.time_s if trace.has_time else np.full(n, np.nan)
-    dt = np.diff(time_s)
-    speed = trace.speed_mps
-    if speed is None:
-        speed = speed_from_positions(np.hypot(np.diff(x), np.diff(y)), dt)
+    reported = trace.speed_mps
+    travel_on = config.use_travel and (trace.odometer_m is not None or reported is not None)
+    sigma, radius, speed, speed_m, slack_m, unknown = _fixes_kernel(
+        np.ascontiguousarray(x, f8),
+        np.ascontiguousarray(y, f8),
+        np.ascontiguousarray(time_s, f8),
+        accuracy,
+        none if reported is None else np.ascontiguousarray(reported, f8),
+        travel_on and reported is not None,
+        float(config.sigma_m),
+        float(config.search_radius_m),
+        float(config.radius_accuracy_factor),
+        float(config.max_search_radius_m),
+        float(config.travel_accel_mps2),
+        float(config.travel_tolerance_mps),
+    )
+    travel = None
+    if travel_on:
+        known = reported is not None
+        travel = Travel(
+            trace.odometer_m,
+            speed_m if known else None,
+            slack_m if known else None,
+            unknown if known else None,
+            unknown if known else None,
+        )
     return Fixes(
         x,
         y,
         time_s,
         sigma,
         radius,
-        speed,
+        speed if reported is None else reported,
         trace.heading_deg,
-        reported_travel(trace, dt, config),
+        travel,
         np.asarray(trace.segment_starts, dtype=np.int64),
     )
+
+
+@njit(cache=True, nogil=True)
+def _fixes_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    x, y, time_s, accuracy, reported, integrate, sigma_m, radius_m, factor, max_radius, accel, tol
+):
+    """
+    Sigma, search radius and estimated speed of every fix, and the speed integral.
+
+    What :func:`search_radii`, :func:`speed_from_positions` and :func:`reported_travel` give,
+    in one call; ``accuracy`` and ``reported`` are empty when the trace has no such column.
+    """
+    n = len(x)
+    sigma, radius = sigma_radius_kernel(n, accuracy, sigma_m, radius_m, factor, max_radius)
+    dt = np.empty(max(n - 1, 0))
+    for i in range(n - 1):
+        dt[i] = time_s[i + 1] - time_s[i]
+    speed = np.empty(0)
+    if not len(reported):
+        step = np.empty(len(dt))
+        for i in range(n - 1):
+            step[i] = np.hypot(x[i + 1] - x[i], y[i + 1] - y[i])
+        speed = _speeds(step, dt)
+    if integrate:
+        speed_m, slack_m, unknown = _integrate(reported, dt, accel, tol)
+    else:
+        speed_m, slack_m, unknown = np.empty(0), np.empty(0), np.empty(0, dtype=np.int64)
+    return sigma, radius, speed, speed_m, slack_m, unknown
+
+
+@njit(cache=True, nogil=True)
+def _speeds(step, dt):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """Speed at each fix: the mean of the steps' speeds before and after it (NaN: unknown)."""
+    m = len(step)
+    big = np.finfo(np.float64).max
+    speed = np.full(max(m + 1, 1), np.nan)
+    v = np.empty(m)
+    for i in range(m):
+        v[i] = step[i] / dt[i] if dt[i] > 0 else np.nan
+    for i in range(m + 1 if m else 0):
+        before = v[i - 1] if i > 0 else v[0]
+        after = v[i] if i < m else v[m - 1]
+        known = (1.0 if np.isfinite(before) else 0.0) + (1.0 if np.isfinite(after) else 0.0)
+        total = _nan_to_num(before, big) + _nan_to_num(after, big)
+        speed[i] = total / known if known > 0 else np.nan
+    return speed
+
+
+@njit(cache=True, nogil=True)
+def _integrate(reported, dt, accel, tol):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Running trapezoid integral of the speeds, its slack and the steps it could not take."""
+    n = len(reported)
+    speed_m = np.zeros(n)
+    slack_m = np.zeros(n)
+    unknown = np.zeros(n, dtype=np.int64)
+    for i in range(1, n):
+        d = dt[i - 1]
+        step = 0.5 * (reported[i - 1] + reported[i]) * d
+        if np.isfinite(step):
+            speed_m[i] = speed_m[i - 1] + step
+            slack_m[i] = slack_m[i - 1] + (accel * d**2 / 4 + tol * d)
+            unknown[i] = unknown[i - 1]
+        else:
+            speed_m[i] = speed_m[i - 1]
+            slack_m[i] = slack_m[i - 1]
+            unknown[i] = unknown[i - 1] + 1
+    return speed_m, slack_m, unknown
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _nan_to_num(v, big):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """``np.nan_to_num`` of one value."""
+    if np.isnan(v):
+        return 0.0
+    if v == np.inf:
+        return big
+    if v == -np.inf:
+        return -big
+    return v
 
 
 def reported_travel(trace: Trace, dt_s: FloatArray, config: MatchConfig) -> Travel | None:
@@ -96,30 +197,22 @@ def reported_travel(trace: Trace, dt_s: FloatArray, config: MatchConfig) -> Trav
     """
     if not config.use_travel or (trace.odometer_m is None and trace.speed_mps is None):
         return None
-    speed_m = slack_m = unknown = None
-    if trace.speed_mps is not None:
-        v = trace.speed_mps
-        step = 0.5 * (v[:-1] + v[1:]) * dt_s
-        missing = ~np.isfinite(step)
-        slack = config.travel_accel_mps2 * dt_s**2 / 4 + config.travel_tolerance_mps * dt_s
-        speed_m = np.concatenate(([0.0], np.cumsum(np.where(missing, 0.0, step))))
-        slack_m = np.concatenate(([0.0], np.cumsum(np.where(missing, 0.0, slack))))
-        unknown = np.concatenate(([0], np.cumsum(missing))).astype(np.int64)
+    if trace.speed_mps is None:
+        return Travel(trace.odometer_m, None, None, None, None)
+    speed_m, slack_m, unknown = _integrate(
+        np.ascontiguousarray(trace.speed_mps, np.float64),
+        np.ascontiguousarray(dt_s, np.float64),
+        float(config.travel_accel_mps2),
+        float(config.travel_tolerance_mps),
+    )
     return Travel(trace.odometer_m, speed_m, slack_m, unknown, unknown)
 
 
 def speed_from_positions(step_m: FloatArray, dt_s: FloatArray) -> FloatArray:
     """Speed at each fix from the distance to its neighbours (NaN where times say nothing)."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        v = np.where(dt_s > 0, step_m / dt_s, np.nan)
-    if len(v) == 0:
-        return np.full(1, np.nan)
-    padded = np.concatenate(([v[0]], v, [v[-1]]))
-    before, after = padded[:-1], padded[1:]
-    known = np.isfinite(before).astype(np.float64) + np.isfinite(after)
-    total = np.nan_to_num(before) + np.nan_to_num(after)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.asarray(np.where(known > 0, total / known, np.nan), dtype=np.float64)
+    f8 = np.float64
+    speed = _speeds(np.ascontiguousarray(step_m, f8), np.ascontiguousarray(dt_s, f8))
+    return np.asarray(speed, dtype=np.float64)
 
 
 def observe(net: RoadNetwork, fixes: Fixes, config: MatchConfig) -> tuple[Observations, Candidates]:

@@ -24,7 +24,50 @@ if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
     from mapmatch.types import BoolArray, FloatArray, IntArray
 
-__all__ = ["Observations", "Travel", "group_fixes", "merge_fixes"]
+__all__ = [
+    "Observations",
+    "Travel",
+    "between_kernel",
+    "group_fixes",
+    "merge_fixes",
+    "travel_arrays",
+]
+
+
+@njit(cache=True, nogil=True)
+def between_kernel(index, odometer, speed_m, slack_m, unknown_lo, unknown_hi):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """:meth:`Travel.between` over a travel's arrays (:func:`travel_arrays`; absent: empty)."""
+    m = max(len(index) - 1, 0)
+    travel = np.full(m, np.nan)
+    slack = np.zeros(m)
+    for k in range(m):
+        i, j = index[k], index[k + 1]
+        if len(speed_m) and unknown_hi[j] == unknown_lo[i]:
+            travel[k] = speed_m[j] - speed_m[i]
+            slack[k] = slack_m[j] - slack_m[i]
+        if len(odometer):
+            odo = odometer[j] - odometer[i]
+            if np.isfinite(odo) and odo >= 0:
+                travel[k] = odo
+                slack[k] = 0.0
+    return travel, slack
+
+
+def travel_arrays(
+    travel: Travel | None,
+) -> tuple[FloatArray, FloatArray, FloatArray, IntArray, IntArray]:
+    """A :class:`Travel`'s five arrays for the kernels, empty where absent."""
+    none_f, none_i = np.empty(0), np.empty(0, dtype=np.int64)
+    if travel is None:
+        return none_f, none_f, none_f, none_i, none_i
+    t = travel
+    return (
+        none_f if t.odometer_m is None else np.ascontiguousarray(t.odometer_m, np.float64),
+        none_f if t.speed_m is None else np.ascontiguousarray(t.speed_m, np.float64),
+        none_f if t.slack_m is None else np.ascontiguousarray(t.slack_m, np.float64),
+        none_i if t.unknown_lo is None else np.ascontiguousarray(t.unknown_lo, np.int64),
+        none_i if t.unknown_hi is None else np.ascontiguousarray(t.unknown_hi, np.int64),
+    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -48,21 +91,7 @@ class Travel:
 
     def between(self, index: IntArray) -> tuple[FloatArray, FloatArray]:
         """Travel and slack between consecutive points ``index`` (NaN travel where unknown)."""
-        i, j = index[:-1], index[1:]
-        travel = np.full(len(i), np.nan)
-        slack = np.zeros(len(i))
-        if self.speed_m is not None and self.slack_m is not None:
-            assert self.unknown_lo is not None
-            assert self.unknown_hi is not None
-            known = self.unknown_hi[j] == self.unknown_lo[i]
-            travel = np.where(known, self.speed_m[j] - self.speed_m[i], np.nan)
-            slack = np.where(known, self.slack_m[j] - self.slack_m[i], 0.0)
-        if self.odometer_m is not None:
-            with np.errstate(invalid="ignore"):
-                odo = self.odometer_m[j] - self.odometer_m[i]
-                exact = np.isfinite(odo) & (odo >= 0)
-            travel = np.where(exact, odo, travel)
-            slack = np.where(exact, 0.0, slack)
+        travel, slack = between_kernel(np.ascontiguousarray(index, np.int64), *travel_arrays(self))
         return travel, slack
 
 
@@ -180,13 +209,108 @@ def group_fixes(
     return np.asarray(group, dtype=np.int64), np.asarray(stray, dtype=bool)
 
 
-def _mean_by(values: FloatArray, group: IntArray, weight: FloatArray, count: int) -> FloatArray:
-    """Weighted mean of ``values`` per group, NaN values and zero weights left out."""
-    ok = np.isfinite(values) & (weight > 0)
-    total = np.bincount(group[ok], weights=(values * weight)[ok], minlength=count)
-    norm = np.bincount(group[ok], weights=weight[ok], minlength=count)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.asarray(np.where(norm > 0, total / norm, np.nan), dtype=np.float64)
+@njit(cache=True, nogil=True)
+def _solo_quick(n, starts, time_s, max_gap):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """The fixes that stay observations of their own, and those close in time to both neighbours."""
+    solo = np.zeros(n + 2, dtype=np.bool_)  # two spare entries: the kernel looks two ahead
+    quick = np.ones(n + 2, dtype=np.bool_)
+    if n == 0:
+        return solo, quick
+    solo[0] = solo[n - 1] = True
+    for s in starts:
+        solo[s] = True
+        solo[s - 1 if s > 0 else n + 1] = True
+    solo[n] = solo[n + 1] = True
+    if n > 1 and len(time_s) == n:
+        for i in range(n):
+            before = time_s[i] - time_s[i - 1] if i > 0 else 0.0
+            after = time_s[i + 1] - time_s[i] if i < n - 1 else 0.0
+            longest = np.fmax(before, after)  # NaN (no times): quick
+            quick[i] = not longest > max_gap
+    return solo, quick
+
+
+@njit(cache=True, nogil=True)
+def _mean_into(values, group, stray, count):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Mean of ``values`` over each group's non-stray fixes, NaN values left out (NaN: none)."""
+    total = np.zeros(count)
+    norm = np.zeros(count)
+    for i in range(len(values)):
+        v = values[i]
+        if not stray[i] and np.isfinite(v):
+            total[group[i]] += v
+            norm[group[i]] += 1.0
+    out = np.empty(count)
+    for g in range(count):
+        out[g] = total[g] / norm[g] if norm[g] > 0 else np.nan
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _merge_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    x, y, time_s, sigma, radius_m, speed, heading, odometer, speed_m, slack_m,
+    unknown_lo, unknown_hi, starts, thinning, max_gap,
+):  # fmt: skip
+    """:func:`merge_fixes` in one pass (optional arrays absent when empty)."""
+    n = len(x)
+    solo, quick = _solo_quick(n, starts, time_s, max_gap)
+    if n == 0:
+        group = np.empty(0, dtype=np.int64)
+        stray = np.zeros(0, dtype=np.bool_)
+    elif thinning <= 0:
+        group = np.arange(n)
+        stray = np.zeros(n, dtype=np.bool_)
+    else:
+        group, stray = _group_kernel(x, y, thinning * sigma, solo, quick)
+    count = group[-1] + 1 if n else 0
+    first = np.empty(count, dtype=np.int64)
+    stop = np.empty(count, dtype=np.int64)
+    for i in range(n):
+        if i == 0 or group[i] != group[i - 1]:
+            first[group[i]] = i
+        if i == n - 1 or group[i + 1] != group[i]:
+            stop[group[i]] = i + 1
+    cx = _mean_into(x, group, stray, count)
+    cy = _mean_into(y, group, stray, count)
+    rep = np.empty(count, dtype=np.int64)
+    pick = np.empty(count, dtype=np.int64)
+    big = np.finfo(np.float64).max
+    radius = np.zeros(count)
+    for g in range(count):
+        best = np.inf
+        fastest = np.inf
+        for i in range(first[g], stop[g]):
+            d = np.hypot(x[i] - cx[g], y[i] - cy[g]) + (1e12 if stray[i] else 0.0)
+            if d < best or i == first[g]:
+                best = d
+                rep[g] = i
+            v = speed[i]  # the fastest fix's heading: -nan_to_num(speed, nan=-1) lowest
+            v = -1.0 if np.isnan(v) else (big if v == np.inf else (-big if v == -np.inf else v))
+            if -v < fastest or i == first[g]:
+                fastest = -v
+                pick[g] = i
+            radius[g] = max(radius[g], radius_m[i])
+    heading_out = np.empty(count if len(heading) else 0)
+    for g in range(len(heading_out)):
+        heading_out[g] = heading[pick[g]]
+    empty = np.empty(0)
+    odo = _mean_into(odometer, group, stray, count) if len(odometer) else empty
+    spd = _mean_into(speed_m, group, stray, count) if len(speed_m) else empty
+    slack = _mean_into(slack_m, group, stray, count) if len(slack_m) else empty
+    lo = np.empty(count if len(unknown_lo) else 0, dtype=np.int64)
+    hi = np.empty(count if len(unknown_hi) else 0, dtype=np.int64)
+    for g in range(len(lo)):
+        lo[g] = unknown_lo[first[g]]
+    for g in range(len(hi)):
+        hi[g] = unknown_hi[stop[g] - 1]
+    return (
+        first, stop, rep, group, stray, cx, cy,
+        _mean_into(time_s, group, stray, count),
+        _mean_into(sigma, group, stray, count),
+        radius,
+        _mean_into(speed, group, stray, count),
+        heading_out, odo, spd, slack, lo, hi,
+    )  # fmt: skip
 
 
 def merge_fixes(
@@ -208,41 +332,34 @@ def merge_fixes(
     centroid fixes (its place along the road), the unknown-step counts at its first and
     last fix.
     """
-    group, stray = group_fixes(x, y, sigma_m, config, segment_starts, time_s)
-    n = len(x)
-    count = int(group[-1]) + 1 if n else 0
-    starts = np.flatnonzero(np.diff(group, prepend=-1) != 0)
-    first = starts.astype(np.int64)
-    stop = np.append(starts[1:], n).astype(np.int64)
-    member = (~stray).astype(np.float64)
-    cx = _mean_by(x, group, member, count)
-    cy = _mean_by(y, group, member, count)
-    d = np.hypot(x - cx[group], y - cy[group]) + stray * 1e12
-    order = np.lexsort((d, group))
-    rep = order[np.flatnonzero(np.diff(group[order], prepend=-1) != 0)].astype(np.int64)
-    speed = _mean_by(speed_mps, group, member, count)
-    heading = None
-    if heading_deg is not None:
-        fastest = np.lexsort((-np.nan_to_num(speed_mps, nan=-1.0), group))
-        pick = fastest[np.flatnonzero(np.diff(group[fastest], prepend=-1) != 0)]
-        heading = heading_deg[pick]
+    f8 = np.float64
+    t = travel
+    out = _merge_kernel(
+        np.ascontiguousarray(x, f8),
+        np.ascontiguousarray(y, f8),
+        np.ascontiguousarray(time_s, f8),
+        np.ascontiguousarray(sigma_m, f8),
+        np.ascontiguousarray(radius_m, f8),
+        np.ascontiguousarray(speed_mps, f8),
+        np.empty(0) if heading_deg is None else np.ascontiguousarray(heading_deg, f8),
+        *travel_arrays(t),
+        np.empty(0, np.int64)
+        if segment_starts is None
+        else np.ascontiguousarray(segment_starts, np.int64),
+        float(config.thinning_sigmas),
+        float(config.outlier_max_gap_s),
+    )
+    first, stop, rep, group, stray, cx, cy, time_m, sigma, radius, speed = out[:11]
+    heading, odo, spd, slack, lo, hi = out[11:]
     merged_travel = None
-    if travel is not None:
+    if t is not None:
         merged_travel = Travel(
-            odometer_m=None
-            if travel.odometer_m is None
-            else _mean_by(travel.odometer_m, group, member, count),
-            speed_m=None
-            if travel.speed_m is None
-            else _mean_by(travel.speed_m, group, member, count),
-            slack_m=None
-            if travel.slack_m is None
-            else _mean_by(travel.slack_m, group, member, count),
-            unknown_lo=None if travel.unknown_lo is None else travel.unknown_lo[first],
-            unknown_hi=None if travel.unknown_hi is None else travel.unknown_hi[stop - 1],
+            odometer_m=None if t.odometer_m is None else odo,
+            speed_m=None if t.speed_m is None else spd,
+            slack_m=None if t.slack_m is None else slack,
+            unknown_lo=None if t.unknown_lo is None else lo,
+            unknown_hi=None if t.unknown_hi is None else hi,
         )
-    radius = np.zeros(count)
-    np.maximum.at(radius, group, radius_m)
     return Observations(
         first=first,
         stop=stop,
@@ -251,10 +368,10 @@ def merge_fixes(
         stray=stray,
         x=cx,
         y=cy,
-        time_s=_mean_by(time_s, group, member, count),
-        sigma_m=_mean_by(sigma_m, group, member, count),
+        time_s=time_m,
+        sigma_m=sigma,
         radius_m=radius,
         speed_mps=speed,
-        heading_deg=heading,
+        heading_deg=None if heading_deg is None else heading,
         travel=merged_travel,
     )

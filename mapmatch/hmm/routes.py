@@ -13,6 +13,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numba import njit
+
+from mapmatch.hmm.emission import flat_arrays
+from mapmatch.hmm.params import P_ROUTE_FACTOR, P_ROUTE_REACH, P_ROUTE_SLACK, model_params
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -28,9 +32,15 @@ __all__ = [
     "ROUTE_VIA_GRAPH",
     "CandidatePairs",
     "candidate_pairs",
+    "forward_route",
+    "held_across",
+    "held_behind",
+    "pairs_kernel",
     "route_search_bounds",
     "routes_between",
+    "search_bound",
     "standstill_distances",
+    "uturn_route",
     "uturn_routes",
 ]
 
@@ -58,9 +68,31 @@ class CandidatePairs:
     b_rank: IntArray
 
 
+@njit(cache=True, nogil=True)
+def pairs_kernel(ptr):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """``(step, a, b, a_rank, b_rank)`` of every candidate pair of consecutive fixes."""
+    n_steps = max(len(ptr) - 2, 0)
+    total = 0
+    for t in range(n_steps):
+        total += (ptr[t + 1] - ptr[t]) * (ptr[t + 2] - ptr[t + 1])
+    step = np.empty(total, dtype=np.int64)
+    a = np.empty(total, dtype=np.int64)
+    b = np.empty(total, dtype=np.int64)
+    a_rank = np.empty(total, dtype=np.int64)
+    b_rank = np.empty(total, dtype=np.int64)
+    k = 0
+    for t in range(n_steps):
+        for i in range(ptr[t + 1] - ptr[t]):
+            for j in range(ptr[t + 2] - ptr[t + 1]):
+                step[k], a[k], b[k] = t, ptr[t] + i, ptr[t + 1] + j
+                a_rank[k], b_rank[k] = i, j
+                k += 1
+    return step, a, b, a_rank, b_rank
+
+
 def candidate_pairs(ptr: IntArray) -> CandidatePairs:
     """
-    All candidate pairs of consecutive fixes, vectorised.
+    All candidate pairs of consecutive fixes, in order of fix, then ``a``, then ``b``.
 
     Examples
     --------
@@ -68,15 +100,27 @@ def candidate_pairs(ptr: IntArray) -> CandidatePairs:
     >>> pairs.a.tolist(), pairs.b.tolist()
     ([0, 1, 2, 2], [2, 2, 3, 4])
     """
-    counts = np.diff(ptr)
-    n_from, n_to = counts[:-1], counts[1:]
-    per_step = n_from * n_to
-    step = np.repeat(np.arange(len(per_step), dtype=np.int64), per_step)
-    first = np.concatenate(([0], np.cumsum(per_step)[:-1]))
-    k = np.arange(int(per_step.sum()), dtype=np.int64) - first[step]
-    width = n_to[step]
-    a_rank, b_rank = k // width, k % width
-    return CandidatePairs(step, ptr[step] + a_rank, ptr[step + 1] + b_rank, a_rank, b_rank)
+    return CandidatePairs(*pairs_kernel(np.ascontiguousarray(ptr, dtype=np.int64)))
+
+
+_BIG = float(np.finfo(np.float64).max)
+
+
+@njit(cache=True, nogil=True)
+def search_bound(great_circle, dt, params):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Longest route worth searching after a step (see :func:`route_search_bounds`)."""
+    bound = params[P_ROUTE_FACTOR] * great_circle + params[P_ROUTE_SLACK]
+    reach = params[P_ROUTE_REACH] * dt  # nan_to_num: unknown 0, infinite the largest float
+    reach = 0.0 if np.isnan(reach) else min(max(reach, -_BIG), _BIG)
+    return max(bound, reach) if not np.isnan(bound) else bound
+
+
+@njit(cache=True, nogil=True)
+def _bounds(great_circle, dt, params):  # type: ignore[no-untyped-def]  # pragma: no cover
+    out = np.empty(len(great_circle))
+    for i in range(len(out)):
+        out[i] = search_bound(great_circle[i], dt[i], params)
+    return out
 
 
 def route_search_bounds(
@@ -94,9 +138,30 @@ def route_search_bounds(
     >>> route_search_bounds(np.array([20.0, 20.0]), np.array([1.0, 60.0]), MatchConfig())
     array([340., 900.])
     """
-    bound = config.route_factor * great_circle_m + config.route_slack_m
-    reach = np.nan_to_num(config.route_reach_mps * dt_s, nan=0.0)
-    return np.asarray(np.maximum(bound, reach), dtype=np.float64)
+    shape, flat = flat_arrays(great_circle_m, dt_s)
+    out = _bounds(*flat, model_params(config))  # type: ignore[call-arg]
+    return np.asarray(out, dtype=np.float64).reshape(shape)
+
+
+@njit(cache=True, nogil=True)
+def forward_route(ea, eb, oa, ob, len_a, speed_a, speed_b, dist, time, uturns):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    Route length, free-flow time and kind from ``(ea, oa)`` to ``(eb, ob)`` driving forward.
+
+    ``dist, time, uturns`` are the router's route from the end of ``ea`` to the start of
+    ``eb`` (``inf`` when none); along the edge when ``b`` is ahead on it.
+    """
+    if ea == eb and ob >= oa:
+        return ob - oa, (ob - oa) / speed_a, ROUTE_SAME_EDGE
+    route = (len_a - oa) + dist + ob
+    free = (len_a - oa) / speed_a + time + ob / speed_b
+    return route, free, ROUTE_UTURN_AT_NODE if uturns > 0 else ROUTE_VIA_GRAPH
+
+
+@njit(cache=True, nogil=True)
+def uturn_route(eb, oa, ob, len_a, twin_a):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Length of a U-turn in the middle of ``a``'s road onto ``b`` (``inf``: not its twin)."""
+    return abs(oa + ob - len_a) if eb == twin_a else np.inf
 
 
 def routes_between(
@@ -125,21 +190,41 @@ def routes_between(
     """
     arrays = net.arrays
     ea, eb = cands.edge[pairs.a], cands.edge[pairs.b]
-    oa, ob = cands.offset_m[pairs.a], cands.offset_m[pairs.b]
-    len_a = arrays.edge_length_m[ea]
-    speed_a, speed_b = arrays.edge_speed_mps[ea], arrays.edge_speed_mps[eb]
-
     routes = net.edge_routes(ea, eb, bounds_m)
-    route = (len_a - oa) + routes.distance_m + ob
-    time = (len_a - oa) / speed_a + routes.time_s + ob / speed_b
-    kind = np.full(len(ea), ROUTE_VIA_GRAPH, dtype=np.int64)
-    kind[routes.uturns > 0] = ROUTE_UTURN_AT_NODE  # turning back onto a twin at a node
-
-    ahead = (ea == eb) & (ob >= oa)
-    route = np.where(ahead, ob - oa, route)
-    time = np.where(ahead, (ob - oa) / speed_a, time)
-    kind[ahead] = ROUTE_SAME_EDGE
+    route, time, kind = _forward_routes(
+        ea,
+        eb,
+        cands.offset_m[pairs.a],
+        cands.offset_m[pairs.b],
+        arrays.edge_length_m,
+        arrays.edge_speed_mps,
+        routes.distance_m,
+        routes.time_s,
+        routes.uturns,
+    )
     return route, time, kind, routes
+
+
+@njit(cache=True, nogil=True)
+def _forward_routes(ea, eb, oa, ob, edge_len, edge_speed, dist, time, uturns):  # type: ignore[no-untyped-def]  # pragma: no cover
+    n = len(ea)
+    route, free = np.empty(n), np.empty(n)
+    kind = np.empty(n, dtype=np.int64)
+    for k in range(n):
+        a, b = ea[k], eb[k]
+        route[k], free[k], kind[k] = forward_route(
+            a,
+            b,
+            oa[k],
+            ob[k],
+            edge_len[a],
+            edge_speed[a],
+            edge_speed[b],
+            dist[k],
+            time[k],
+            uturns[k],
+        )
+    return route, free, kind
 
 
 def standstill_distances(
@@ -167,15 +252,45 @@ def standstill_distances(
     arrays = net.arrays
     ea, eb = cands.edge[pairs.a], cands.edge[pairs.b]
     oa, ob = cands.offset_m[pairs.a], cands.offset_m[pairs.b]
-    back = np.full(len(ea), np.inf)
-    same = (ea == eb) & (ob <= oa)
-    back[same] = (oa - ob)[same]
-    gap = np.hypot(cands.x[pairs.a] - cands.x[pairs.b], cands.y[pairs.a] - cands.y[pairs.b])
-    near = np.flatnonzero((ea != eb) & (gap <= tolerance_m))
+    tol = np.ascontiguousarray(tolerance_m, dtype=np.float64)
+    ax, ay, bx, by = cands.x[pairs.a], cands.y[pairs.a], cands.x[pairs.b], cands.y[pairs.b]
+    back, near = held_behind(ea, eb, oa, ob, ax, ay, bx, by, tol)
     if len(near):
-        routes = net.edge_routes(eb[near], ea[near], tolerance_m[near])
-        back[near] = (arrays.edge_length_m[eb[near]] - ob[near]) + routes.distance_m + oa[near]
-    return np.where(back <= tolerance_m, back, np.inf)
+        routes = net.edge_routes(eb[near], ea[near], tol[near])
+        held_across(back, near, ea, eb, oa, ob, arrays.edge_length_m, routes.distance_m, tol)
+    return np.asarray(back, dtype=np.float64)
+
+
+@njit(cache=True, nogil=True)
+def held_behind(ea, eb, oa, ob, ax, ay, bx, by, tolerance):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    How far ``b`` lies behind ``a`` on one edge, and the pairs to route from ``b`` to ``a``.
+
+    ``back`` is the distance where ``b`` is behind ``a`` on their edge within the tolerance,
+    ``inf`` elsewhere; ``near`` the pairs on different edges close enough in the plane.
+    """
+    n = len(ea)
+    back = np.full(n, np.inf)
+    near = np.empty(n, dtype=np.int64)
+    m = 0
+    for k in range(n):
+        if ea[k] == eb[k]:
+            if ob[k] <= oa[k] and oa[k] - ob[k] <= tolerance[k]:
+                back[k] = oa[k] - ob[k]
+        elif np.hypot(ax[k] - bx[k], ay[k] - by[k]) <= tolerance[k]:
+            near[m] = k
+            m += 1
+    return back, near[:m]
+
+
+@njit(cache=True, nogil=True)
+def held_across(back, near, ea, eb, oa, ob, edge_len, dist, tolerance):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Fill in ``back`` for the pairs ``near``, given the routes from ``eb`` to ``ea``."""
+    for i in range(len(near)):
+        k = near[i]
+        d = (edge_len[eb[k]] - ob[k]) + dist[i] + oa[k]
+        if d <= tolerance[k]:
+            back[k] = d
 
 
 def uturn_routes(net: RoadNetwork, cands: Candidates, pairs: CandidatePairs) -> FloatArray:
@@ -194,5 +309,14 @@ def uturn_routes(net: RoadNetwork, cands: Candidates, pairs: CandidatePairs) -> 
     arrays = net.arrays
     ea, eb = cands.edge[pairs.a], cands.edge[pairs.b]
     oa, ob = cands.offset_m[pairs.a], cands.offset_m[pairs.b]
-    u_route = np.abs(oa + ob - arrays.edge_length_m[ea])
-    return np.where(eb == arrays.edge_twin[ea], u_route, np.inf)
+    return np.asarray(
+        _uturn_routes(ea, eb, oa, ob, arrays.edge_length_m, arrays.edge_twin), dtype=np.float64
+    )
+
+
+@njit(cache=True, nogil=True)
+def _uturn_routes(ea, eb, oa, ob, edge_len, edge_twin):  # type: ignore[no-untyped-def]  # pragma: no cover
+    out = np.empty(len(ea))
+    for k in range(len(ea)):
+        out[k] = uturn_route(eb[k], oa[k], ob[k], edge_len[ea[k]], edge_twin[ea[k]])
+    return out

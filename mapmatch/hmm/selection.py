@@ -1,10 +1,17 @@
-"""Which observations enter the HMM: displaced ones (outliers, bursts of multipath) are left out."""
+"""Which observations enter the HMM: displaced ones (outliers, bursts of multipath) are left out.
+
+The tests run compiled (one call per trace, :func:`find_displaced`); :func:`find_outliers` and
+:func:`find_off_road_runs` are the same tests on given arrays.
+"""
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numba import njit
+
+from mapmatch.hmm.observations import between_kernel, travel_arrays
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -14,6 +21,128 @@ if TYPE_CHECKING:
     from mapmatch.types import BoolArray, FloatArray
 
 __all__ = ["find_displaced", "find_off_road_runs", "find_outliers"]
+
+
+def _params(config: MatchConfig) -> FloatArray:
+    """The outlier parameters, in the order the kernels read them."""
+    return np.array(
+        [
+            config.outlier_sigmas,
+            config.outlier_max_gap_s,
+            config.outlier_detour_ratio,
+            config.max_emission_penalty,
+            config.outlier_max_run,
+        ],
+        dtype=np.float64,
+    )
+
+
+@njit(cache=True, nogil=True)
+def _outliers(x, y, sigma, gaps, travel_m, slack_m, params):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """:func:`find_outliers` (``travel_m`` empty: no travel known)."""
+    n = len(x)
+    out = np.zeros(n, dtype=np.bool_)
+    sigmas, max_gap, ratio = params[0], params[1], params[2]
+    if n < 3 or sigmas <= 0:
+        return out
+    detour = np.empty(n)
+    for i in range(1, n - 1):
+        d_prev = np.hypot(x[i] - x[i - 1], y[i] - y[i - 1])
+        d_next = np.hypot(x[i + 1] - x[i], y[i + 1] - y[i])
+        detour[i] = d_prev + d_next - np.hypot(x[i + 1] - x[i - 1], y[i + 1] - y[i - 1])
+    detour[0] = detour[n - 1] = 0.0
+    for i in range(1, n - 1):
+        d_prev = np.hypot(x[i] - x[i - 1], y[i] - y[i - 1])
+        d_next = np.hypot(x[i + 1] - x[i], y[i + 1] - y[i])
+        d_skip = np.hypot(x[i + 1] - x[i - 1], y[i + 1] - y[i - 1])
+        close = not gaps[i - 1] > max_gap and not gaps[i] > max_gap
+        sharp = d_prev + d_next > ratio * d_skip
+        # a good fix next to an outlier makes a detour too; blame only the local worst
+        worst = detour[i] >= detour[i - 1] and detour[i] >= detour[i + 1]
+        far = 0.5 * (d_prev + d_next) > sigmas * sigma[i]
+        out[i] = close and far and sharp and worst
+    if len(travel_m):
+        for end, inner, step in ((0, 1, 0), (n - 1, n - 2, n - 2)):
+            gap = np.hypot(x[end] - x[inner], y[end] - y[inner])
+            allowed = travel_m[step] + slack_m[step] + sigmas * sigma[end]
+            quick = gaps[min(end, inner)] <= max_gap
+            if quick and not out[inner] and gap > allowed:
+                out[end] = True
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _off_road(nearest, sigma, gaps, params):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """:func:`find_off_road_runs`."""
+    n = len(nearest)
+    out = np.zeros(n, dtype=np.bool_)
+    sigmas, max_gap, max_run = params[0], params[1], params[4]
+    if n < 3 or sigmas <= 0:
+        return out
+    # beyond the emission floor's distance no road explains the fix better than another
+    floor = np.sqrt(2.0 * max(params[3], 2.0))
+    start = 0
+    while start < n:
+        if not nearest[start] > floor * sigma[start]:
+            start += 1
+            continue
+        stop = start
+        while stop < n and nearest[stop] > floor * sigma[stop]:
+            stop += 1
+        inside = start > 0 and stop < n and stop - start <= max_run
+        if (
+            inside
+            and nearest[start - 1] <= 2.0 * sigma[start - 1]
+            and nearest[stop] <= 2.0 * sigma[stop]
+        ):
+            short = True
+            for k in range(start - 1, stop):
+                short = short and not gaps[k] > max_gap  # NaN (no times) counts as short
+            if short:
+                out[start:stop] = True
+        start = stop
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _displaced(ptr, distance, fix_time, first, stop, x, y, sigma, travel, params):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """:func:`find_displaced` over arrays (``travel``: the five arrays of a Travel, or empty)."""
+    n = len(first)
+    nearest = np.full(n, np.inf)
+    n_near = 0
+    near = np.empty(n, dtype=np.int64)
+    for k in range(n):
+        if ptr[k + 1] > ptr[k]:
+            nearest[k] = distance[ptr[k]]  # rows of a fix are nearest first
+            near[n_near] = k
+            n_near += 1
+    gaps = np.empty(max(n - 1, 0))
+    for k in range(n - 1):
+        gaps[k] = fix_time[first[k + 1]] - fix_time[stop[k] - 1]
+    outlier = _off_road(nearest, sigma, gaps, params)
+    odometer, speed_m, slack_m, lo, hi = travel
+    for _ in range(3):
+        m = 0
+        kept = np.empty(n_near, dtype=np.int64)
+        for k in range(n_near):
+            if not outlier[near[k]]:
+                kept[m] = near[k]
+                m += 1
+        kept = kept[:m]
+        if len(speed_m) or len(odometer):
+            travel_m, slack = between_kernel(kept, odometer, speed_m, slack_m, lo, hi)
+        else:
+            travel_m, slack = np.empty(0), np.empty(0)
+        gap = np.empty(max(m - 1, 0))
+        for k in range(m - 1):
+            gap[k] = fix_time[first[kept[k + 1]]] - fix_time[stop[kept[k]] - 1]
+        found = _outliers(x[kept], y[kept], sigma[kept], gap, travel_m, slack, params)
+        if not found.any():
+            break
+        for k in range(m):
+            if found[k]:
+                outlier[kept[k]] = True
+    return outlier
 
 
 def find_outliers(
@@ -53,32 +182,19 @@ def find_outliers(
     >>> find_outliers(x, np.zeros(5), np.arange(5.0), np.full(5, 5.0), MatchConfig()).tolist()
     [False, False, True, False, False]
     """
-    n = len(x)
-    out = np.zeros(n, dtype=bool)
-    if n < 3 or config.outlier_sigmas <= 0:
-        return out
-    gaps = np.diff(time_s) if gap_s is None else gap_s
-    gap_before, gap_after = gaps[:-1], gaps[1:]
-    close = ~(gap_before > config.outlier_max_gap_s) & ~(gap_after > config.outlier_max_gap_s)
-    d_prev = np.hypot(x[1:-1] - x[:-2], y[1:-1] - y[:-2])
-    d_next = np.hypot(x[2:] - x[1:-1], y[2:] - y[1:-1])
-    d_skip = np.hypot(x[2:] - x[:-2], y[2:] - y[:-2])
-    detour = d_prev + d_next - d_skip
-    sharp = d_prev + d_next > config.outlier_detour_ratio * d_skip
-    # a good fix next to an outlier makes a detour too; blame only the local worst
-    padded = np.concatenate(([0.0], detour, [0.0]))
-    worst = (detour >= padded[:-2]) & (detour >= padded[2:])
-    far = 0.5 * (d_prev + d_next) > config.outlier_sigmas * sigma_m[1:-1]
-    out[1:-1] = close & far & sharp & worst
-    if travel is not None:
-        travel_m, slack_m = travel
-        for end, inner, step in ((0, 1, 0), (n - 1, n - 2, n - 2)):
-            gap = float(np.hypot(x[end] - x[inner], y[end] - y[inner]))
-            allowed = travel_m[step] + slack_m[step] + config.outlier_sigmas * sigma_m[end]
-            quick = gaps[min(end, inner)] <= config.outlier_max_gap_s
-            if quick and not out[inner] and gap > allowed:
-                out[end] = True
-    return out
+    f8 = np.float64
+    gaps = np.diff(np.asarray(time_s, f8)) if gap_s is None else gap_s
+    travel_m, slack_m = (np.empty(0), np.empty(0)) if travel is None else travel
+    out = _outliers(
+        np.ascontiguousarray(x, f8),
+        np.ascontiguousarray(y, f8),
+        np.ascontiguousarray(sigma_m, f8),
+        np.ascontiguousarray(gaps, f8),
+        np.ascontiguousarray(travel_m, f8),
+        np.ascontiguousarray(slack_m, f8),
+        _params(config),
+    )
+    return np.asarray(out, dtype=bool)
 
 
 def find_off_road_runs(
@@ -104,21 +220,14 @@ def find_off_road_runs(
     [False, False, True, True, False, False]
 
     """
-    n = len(nearest_m)
-    out = np.zeros(n, dtype=bool)
-    if n < 3 or config.outlier_sigmas <= 0:
-        return out
-    # beyond the emission floor's distance no road explains the fix better than another
-    far = nearest_m > np.sqrt(2.0 * max(config.max_emission_penalty, 2.0)) * sigma_m
-    on_road = nearest_m <= 2.0 * sigma_m
-    short = ~(gap_s > config.outlier_max_gap_s)  # NaN (no times) counts as short
-    edges = np.flatnonzero(np.diff(np.concatenate(([0], far.astype(np.int8), [0]))))
-    for start, stop in zip(edges[0::2].tolist(), edges[1::2].tolist(), strict=True):
-        if start == 0 or stop == n or stop - start > config.outlier_max_run:
-            continue
-        if on_road[start - 1] and on_road[stop] and bool(short[start - 1 : stop].all()):
-            out[start:stop] = True
-    return out
+    f8 = np.float64
+    out = _off_road(
+        np.ascontiguousarray(nearest_m, f8),
+        np.ascontiguousarray(sigma_m, f8),
+        np.ascontiguousarray(gap_s, f8),
+        _params(config),
+    )
+    return np.asarray(out, dtype=bool)
 
 
 def find_displaced(
@@ -132,19 +241,16 @@ def find_displaced(
     (:func:`find_outliers`); of two displaced ones in a row only the worse is caught at first,
     so that test runs again without the ones found, up to three times.
     """
-    near = np.flatnonzero(cands.counts > 0)
-    nearest = np.full(len(obs), np.inf)
-    nearest[near] = cands.distance_m[cands.ptr[near]]  # rows of a fix are nearest first
-    gaps = fixes.time_s[obs.first[1:]] - fixes.time_s[obs.stop[:-1] - 1]
-    outlier = find_off_road_runs(nearest, obs.sigma_m, gaps, config)
-    for _ in range(3):
-        kept = near[~outlier[near]]
-        travel = obs.travel.between(kept) if obs.travel is not None else None
-        gap = fixes.time_s[obs.first[kept[1:]]] - fixes.time_s[obs.stop[kept[:-1]] - 1]
-        found = find_outliers(
-            obs.x[kept], obs.y[kept], obs.time_s[kept], obs.sigma_m[kept], config, travel, gap
-        )
-        if not found.any():
-            break
-        outlier[kept[found]] = True
-    return outlier
+    out = _displaced(
+        cands.ptr,
+        cands.distance_m,
+        np.ascontiguousarray(fixes.time_s, np.float64),
+        obs.first,
+        obs.stop,
+        obs.x,
+        obs.y,
+        obs.sigma_m,
+        travel_arrays(obs.travel),
+        _params(config),
+    )
+    return np.asarray(out, dtype=bool)

@@ -6,24 +6,48 @@ interval and the position sigma, a speed-plausibility term against the roads' li
 travelled, and the cost of a U-turn, lowered by heading evidence. ``transitions`` scores every
 pair's forward route, its U-turn in the middle of the road and its standstill, and keeps the
 best.
+
+The scores are compiled functions of one pair (:func:`transition_score`,
+:func:`uturn_cost`); :func:`transitions_kernel` scores every pair of a trellis in one call,
+its routes searched (or looked up in a precomputed table) from inside.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numba import njit
 
-from mapmatch.hmm.emission import distance_emission, heading_weight
+from mapmatch.hmm.emission import angle_between, distance_score, flat_arrays, speed_weight
+from mapmatch.hmm.params import (
+    P_BETA_M,
+    P_BETA_PER_S,
+    P_BETA_PER_SIGMA,
+    P_NOMINAL_SPEED,
+    P_SPEED_FACTOR,
+    P_SPEED_MARGIN,
+    P_SPEED_SIGMA,
+    P_STANDSTILL_M,
+    P_STANDSTILL_SIGMAS,
+    P_TRAVEL_BETA,
+    P_TRAVEL_TOLERANCE_FRAC,
+    P_TRAVEL_TOLERANCE_M,
+    P_UTURN_EVIDENCE_PENALTY,
+    P_UTURN_PENALTY,
+    model_params,
+)
 from mapmatch.hmm.routes import (
     ROUTE_STANDSTILL,
     ROUTE_UTURN,
     ROUTE_UTURN_AT_NODE,
     CandidatePairs,
-    routes_between,
-    standstill_distances,
-    uturn_routes,
+    forward_route,
+    held_across,
+    held_behind,
+    uturn_route,
 )
+from roadnets.route_search import gather, route_pairs_kernel, table_records
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -32,7 +56,66 @@ if TYPE_CHECKING:
     from mapmatch.types import FloatArray, IntArray
     from roadnets import EdgeRoutes, RoadNetwork
 
-__all__ = ["log_transition", "transitions", "uturn_penalties"]
+__all__ = [
+    "log_transition",
+    "route_inputs",
+    "routes_found",
+    "transition_score",
+    "transitions",
+    "transitions_kernel",
+    "uturn_cost",
+    "uturn_penalties",
+]
+
+_BIG = float(np.finfo(np.float64).max)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _nan_to_num(v):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    if np.isnan(v):
+        return 0.0
+    return min(max(v, -_BIG), _BIG)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _max0(v):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """``np.maximum(v, 0.0)``: NaN stays NaN."""
+    return v if np.isnan(v) or v > 0.0 else 0.0
+
+
+@njit(cache=True, nogil=True)
+def transition_score(gc, route, time, uturn, dt, sigma, travel, slack, penalty, params):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    :func:`log_transition` of one pair: ``uturn`` whether it turns, ``penalty`` what that costs.
+
+    ``travel`` is NaN where the trace says nothing of the distance travelled.
+    """
+    timed = np.isfinite(dt) and dt > 0
+    interval = dt if timed else gc / params[P_NOMINAL_SPEED]
+    beta = params[P_BETA_M] + params[P_BETA_PER_S] * interval + params[P_BETA_PER_SIGMA] * sigma
+    score = -abs(gc - route) / beta
+    needed = _max0(route - 2.0 * sigma) / dt if timed else np.nan
+    limit = route / time if time > 0 else np.inf
+    allowed = params[P_SPEED_FACTOR] * limit + params[P_SPEED_MARGIN]
+    excess = _max0(needed - allowed)
+    score = score - 0.5 * (_nan_to_num(excess) / params[P_SPEED_SIGMA]) ** 2
+    tolerance = params[P_TRAVEL_TOLERANCE_M] + params[P_TRAVEL_TOLERANCE_FRAC] * travel + slack
+    off = _max0(abs(route - travel) - tolerance)
+    score = score - _nan_to_num(off) / params[P_TRAVEL_BETA]
+    if uturn:
+        score = score - penalty
+    return score if np.isfinite(route) else -np.inf
+
+
+@njit(cache=True, nogil=True)
+def _scores(gc, route, time, kind, dt, sigma, travel, slack, penalty, params):  # type: ignore[no-untyped-def]  # pragma: no cover
+    out = np.empty(len(gc))
+    for k in range(len(gc)):
+        turn = kind[k] == ROUTE_UTURN or kind[k] == ROUTE_UTURN_AT_NODE
+        out[k] = transition_score(
+            gc[k], route[k], time[k], turn, dt[k], sigma[k], travel[k], slack[k], penalty[k], params
+        )
+    return out
 
 
 def log_transition(
@@ -58,7 +141,9 @@ def log_transition(
     more than the tolerance (``travel_tolerance_m + travel_tolerance_frac * travel + slack``)
     costs the excess over ``travel_beta_m``. Inside the tolerance the term is flat, so the
     fused distance never pulls the matched length and the distance check stays independent.
-    Unreachable pairs (``route = inf``) are ``-inf``.
+    Unreachable pairs (``route = inf``) are ``-inf``. A step without a usable time (none
+    known, or a repeated one) is a distance-only step: no speed term, and the interval that
+    widens beta is the one a car at the nominal speed would need for the step.
 
     Examples
     --------
@@ -67,29 +152,33 @@ def log_transition(
     ...                np.array([1]), np.array([1.0]), np.array([5.0]), MatchConfig())
     array([-0.625])
     """
-    # a step without a usable time (none known, or a repeated one) is a distance-only step:
-    # no speed term, and the interval that widens beta is the one a car at the nominal speed
-    # would need for the step
-    timed = np.isfinite(dt_s) & (dt_s > 0)
-    interval_s = np.where(timed, dt_s, great_circle_m / config.nominal_speed_mps)
-    beta = config.beta_m + config.beta_per_s * interval_s + config.beta_per_sigma * sigma_m
-    with np.errstate(invalid="ignore", divide="ignore"):
-        score = -np.abs(great_circle_m - route_m) / beta
-        needed = np.where(timed, np.maximum(route_m - 2.0 * sigma_m, 0.0) / dt_s, np.nan)
-        limit = np.where(time_s > 0, route_m / time_s, np.inf)
-        allowed = config.speed_factor * limit + config.speed_margin_mps
-        excess = np.maximum(needed - allowed, 0.0)
-    score = score - 0.5 * (np.nan_to_num(excess, nan=0.0) / config.speed_sigma_mps) ** 2
-    if travel is not None:
-        travel_m, slack_m = travel
-        tolerance = config.travel_tolerance_m + config.travel_tolerance_frac * travel_m + slack_m
-        with np.errstate(invalid="ignore", over="ignore"):
-            off = np.maximum(np.abs(route_m - travel_m) - tolerance, 0.0)
-        score = score - np.nan_to_num(off, nan=0.0) / config.travel_beta_m
-    uturn = (kind == ROUTE_UTURN) | (kind == ROUTE_UTURN_AT_NODE)
+    travel_m, slack_m = (np.nan, 0.0) if travel is None else travel
     penalty = config.uturn_penalty if uturn_penalty is None else uturn_penalty
-    score = np.where(uturn, score - penalty, score)
-    return np.where(np.isfinite(route_m), score, -np.inf)
+    values = (great_circle_m, route_m, time_s, kind, dt_s, sigma_m, travel_m, slack_m, penalty)
+    shape, flat = flat_arrays(*values)
+    flat[3] = flat[3].astype(np.int64)
+    out = _scores(*flat, model_params(config))  # type: ignore[call-arg]
+    return np.asarray(out, dtype=np.float64).reshape(shape)
+
+
+@njit(cache=True, nogil=True)
+def uturn_cost(heading_a, heading_b, weight, params):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """What a U-turn between two fixes costs given their headings (see :func:`uturn_penalties`)."""
+    evidence = (
+        (0.0 if np.isnan(weight) else weight)
+        if angle_between(heading_a, heading_b) > 120.0
+        else 0.0
+    )
+    plain = params[P_UTURN_PENALTY]
+    return plain + evidence * (params[P_UTURN_EVIDENCE_PENALTY] - plain)
+
+
+@njit(cache=True, nogil=True)
+def _uturn_costs(heading_a, heading_b, weight, params):  # type: ignore[no-untyped-def]  # pragma: no cover
+    out = np.empty(len(heading_a))
+    for k in range(len(out)):
+        out[k] = uturn_cost(heading_a[k], heading_b[k], weight[k], params)
+    return out
 
 
 def uturn_penalties(
@@ -111,12 +200,178 @@ def uturn_penalties(
     >>> bool(p[0] == cfg.uturn_evidence_penalty), bool(p[1] == cfg.uturn_penalty)
     (True, True)
     """
-    diff = np.abs((heading_a - heading_b + 180.0) % 360.0 - 180.0)
-    evidence = np.where(diff > 120.0, np.nan_to_num(weight, nan=0.0), 0.0)
-    return np.asarray(
-        config.uturn_penalty + evidence * (config.uturn_evidence_penalty - config.uturn_penalty),
-        dtype=np.float64,
+    shape, flat = flat_arrays(heading_a, heading_b, weight)
+    out = _uturn_costs(*flat, model_params(config))  # type: ignore[call-arg]
+    return np.asarray(out, dtype=np.float64).reshape(shape)
+
+
+@njit(cache=True, nogil=True)
+def _pair_routes(graph, ws, scratch, uturn_cost_m, table, from_edge, to_edge, bounds):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    Routes of edge pairs: from the precomputed table when every bound fits in it, else searched.
+
+    Returns whether the table answered, the searches' output of
+    :func:`~roadnets.route_search.route_pairs_kernel` (empty then) and per pair its record,
+    length, time and U-turns.
+    """
+    t_bound, t_sources, t_ptr, t_state, t_order, t_dist, t_time, t_turns, copy_ptr, copy_state = (
+        table
     )
+    fits = True
+    for k in range(len(bounds)):
+        fits = fits and bounds[k] <= t_bound
+    if fits:
+        rec = table_records(
+            t_sources, t_ptr, t_state, t_order, copy_ptr, copy_state, from_edge, to_edge
+        )
+        dist, time, turns = gather(rec, t_dist, t_time, t_turns)
+        e_i, e_f = np.empty(0, dtype=np.int64), np.empty(0)
+        searched = (
+            e_i, e_f, e_i, np.empty(0, dtype=np.int32), e_f, e_f, np.empty(0, dtype=np.int16),
+            e_i, e_i, e_i, e_i,
+        )  # fmt: skip
+        return True, searched, rec, dist, time, turns
+    out = route_pairs_kernel(graph, from_edge, to_edge, bounds, uturn_cost_m, ws, scratch)
+    searched = out[:11]
+    return False, searched, out[11], out[12], out[13], out[14]
+
+
+@njit(cache=True, nogil=True)
+def transitions_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    graph, ws, scratch, uturn_cost_m, table, edge_speed,
+    c_edge, c_off, c_dist, c_x, c_y,
+    step, a, b, bounds,
+    step_m, dt, sigma, fix_x, fix_y, travel_m, slack_m, heading, speed,
+    params,
+):  # fmt: skip
+    """
+    Log transition and route kind of every candidate pair (see :func:`transitions`).
+
+    ``step_m, dt, travel_m, slack_m`` are per step between the used observations,
+    ``sigma, fix_x, fix_y, heading, speed`` per used observation (``travel_m`` and
+    ``heading`` empty when unknown). Returns the scores, the kinds and the forward routes
+    (:func:`_pair_routes`).
+    """
+    edge_len, edge_twin = graph[6], graph[5]
+    n = len(a)
+    ea, eb = c_edge[a], c_edge[b]
+    oa, ob = c_off[a], c_off[b]
+    fits, searched, rec, r_dist, r_time, r_turns = _pair_routes(
+        graph, ws, scratch, uturn_cost_m, table, ea, eb, bounds
+    )
+    lt = np.empty(n)
+    kind = np.empty(n, dtype=np.int64)
+    step_sigma = np.empty(n)
+    tolerance = np.empty(n)
+    penalty = np.empty(n)
+    for k in range(n):
+        t = step[k]
+        s = max(sigma[t], sigma[t + 1])
+        step_sigma[k] = s
+        tolerance[k] = max(params[P_STANDSTILL_M], params[P_STANDSTILL_SIGMAS] * s)
+        if len(heading):
+            w = min(speed_weight(speed[t], params), speed_weight(speed[t + 1], params))
+            penalty[k] = uturn_cost(heading[t], heading[t + 1], w, params)
+        else:
+            penalty[k] = params[P_UTURN_PENALTY]
+        e1, e2 = ea[k], eb[k]
+        route, free, kind[k] = forward_route(
+            e1, e2, oa[k], ob[k], edge_len[e1], edge_speed[e1], edge_speed[e2],
+            r_dist[k], r_time[k], r_turns[k],
+        )  # fmt: skip
+        travel, slack = (travel_m[t], slack_m[t]) if len(travel_m) else (np.nan, 0.0)
+        turn = kind[k] == ROUTE_UTURN_AT_NODE
+        lt[k] = transition_score(
+            step_m[t], route, free, turn, dt[t], s, travel, slack, penalty[k], params
+        )
+        # a U-turn in the middle of the road
+        u = uturn_route(e2, oa[k], ob[k], edge_len[e1], edge_twin[e1])
+        if np.isfinite(u):
+            score = transition_score(
+                step_m[t], u, u / edge_speed[e1], True, dt[t], s, travel, slack, penalty[k], params
+            )
+            score = score + 0.0
+            if score > lt[k]:
+                lt[k] = score
+                kind[k] = ROUTE_UTURN
+    # holding still: b a little behind a, on its edge or across edges
+    back, near = held_behind(ea, eb, oa, ob, c_x[a], c_y[a], c_x[b], c_y[b], tolerance)
+    if len(near):
+        _, _, _, dist_back, _, _ = _pair_routes(
+            graph, ws, scratch, uturn_cost_m, table, eb[near], ea[near], tolerance[near]
+        )
+        held_across(back, near, ea, eb, oa, ob, edge_len, dist_back, tolerance)
+    for k in range(n):
+        if not np.isfinite(back[k]):
+            continue
+        t = step[k]
+        fb = t + 1
+        at_a = np.hypot(fix_x[fb] - c_x[a[k]], fix_y[fb] - c_y[a[k]])
+        # never better than b's own emission: holding is an explanation of b, not a bonus
+        extra = min(
+            distance_score(at_a, sigma[fb], params)
+            - distance_score(c_dist[b[k]], sigma[fb], params),
+            0.0,
+        )
+        travel, slack = (travel_m[t], slack_m[t]) if len(travel_m) else (np.nan, 0.0)
+        score = transition_score(
+            step_m[t], 0.0, 0.0, False, dt[t], step_sigma[k], travel, slack, penalty[k], params
+        )
+        score = score + extra
+        if score > lt[k]:
+            lt[k] = score
+            kind[k] = ROUTE_STANDSTILL
+    return lt, kind, fits, searched, rec, r_dist, r_time, r_turns
+
+
+#: The table argument of :func:`transitions_kernel` when the network has no usable table.
+_NO_TABLE = (
+    -np.inf,
+    np.zeros(0, dtype=np.int64),
+    np.zeros(1, dtype=np.int64),
+    np.zeros(0, dtype=np.int32),
+    np.zeros(0, dtype=np.int32),
+    np.zeros(0),
+    np.zeros(0),
+    np.zeros(0, dtype=np.int16),
+    np.zeros(1, dtype=np.int64),
+    np.zeros(0, dtype=np.int32),
+)
+
+
+def route_inputs(net: RoadNetwork) -> tuple[Any, ...]:
+    """
+    ``(graph, ws, scratch, uturn_cost_m, table)``: what :func:`transitions_kernel` routes with.
+
+    The network's search arrays and this thread's scratch (:mod:`roadnets.routes`), and the
+    precomputed route table of :meth:`~roadnets.RoadNetwork.precompute_routes` when the
+    network has one the matcher's searches may use (by length, the default U-turn cost);
+    a table with bound ``-inf`` otherwise.
+    """
+    from roadnets.routes import DEFAULT_UTURN_COST_M, scratch, search_graph
+
+    ws, group = scratch(net.arrays, net.turns)
+    graph = search_graph(net.arrays, net.turns)
+    table = net.precomputed_routes
+    if table is not None and not table.weighted and table.uturn_cost_m == DEFAULT_UTURN_COST_M:
+        bound = float(table.bounds_m.min(initial=np.inf))
+        t = (bound, table.sources, table.ptr, table.state, table._order(), table.distance_m,
+             table.time_s, table.uturns, net.turns.copy_ptr, net.turns.copy_state)  # fmt: skip
+    else:
+        t = _NO_TABLE
+    return graph, ws, group, DEFAULT_UTURN_COST_M, t
+
+
+def routes_found(net: RoadNetwork, ea: IntArray, eb: IntArray, out: tuple[Any, ...]) -> EdgeRoutes:
+    """The :class:`~roadnets.EdgeRoutes` of the forward routes :func:`transitions_kernel` took."""
+    from roadnets.routes import DEFAULT_UTURN_COST_M, EdgeRoutes, edge_routes_of
+
+    fits, searched, rec, dist, time, turns = out
+    if fits:
+        assert net.precomputed_routes is not None
+        return EdgeRoutes(ea, eb, dist, time, turns, rec, net.precomputed_routes)
+    found = (*searched, rec, dist, time, turns)
+    return edge_routes_of(net.turns, (DEFAULT_UTURN_COST_M, None, None), ea, eb, found)
 
 
 def transitions(
@@ -137,59 +392,27 @@ def transitions(
     where ``b`` lies a little behind ``a``. A held car is where ``a`` is, so the standstill
     is also charged the emission ``b``'s fix has at ``a``'s place instead of its own.
     """
-    arrays = net.arrays
-    route, free_time, kind, routes = routes_between(net, cands, pairs, bounds_m)
-    gc, dt = step_m[pairs.step], np.diff(fixes.time_s[used])[pairs.step]
-    sigma = fixes.sigma_m[used]
-    step_sigma = np.maximum(sigma[pairs.step], sigma[pairs.step + 1])
-    travel = fixes.travel.between(used) if fixes.travel is not None else None
-    step_travel = None if travel is None else (travel[0][pairs.step], travel[1][pairs.step])
-    uturn_cost: FloatArray | float = config.uturn_penalty
-    if fixes.heading_deg is not None:
-        weight = heading_weight(fixes.speed_mps[used], config)
-        heading = fixes.heading_deg[used]
-        uturn_cost = uturn_penalties(
-            heading[pairs.step],
-            heading[pairs.step + 1],
-            np.minimum(weight[pairs.step], weight[pairs.step + 1]),
-            config,
-        )
-    lt = log_transition(gc, route, free_time, kind, dt, step_sigma, config, step_travel, uturn_cost)
-
-    def consider(
-        where: IntArray, route_m: FloatArray, time_s: FloatArray, move: int, extra: FloatArray
-    ) -> None:
-        sub = None if step_travel is None else (step_travel[0][where], step_travel[1][where])
-        moves = np.full(len(where), move)
-        cost = uturn_cost[where] if isinstance(uturn_cost, np.ndarray) else uturn_cost
-        score = log_transition(
-            gc[where], route_m, time_s, moves, dt[where], step_sigma[where], config, sub, cost
-        )
-        score = score + extra
-        better = score > lt[where]
-        lt[where[better]] = score[better]
-        kind[where[better]] = move
-
-    u_route = uturn_routes(net, cands, pairs)
-    twins = np.flatnonzero(np.isfinite(u_route))  # a U-turn in place is possible
-    if len(twins):
-        u_time = u_route[twins] / arrays.edge_speed_mps[cands.edge[pairs.a[twins]]]
-        consider(twins, u_route[twins], u_time, ROUTE_UTURN, np.zeros(len(twins)))
-
-    tolerance = np.maximum(config.standstill_m, config.standstill_sigmas * step_sigma)
-    back = standstill_distances(net, cands, pairs, tolerance)
-    held = np.flatnonzero(np.isfinite(back))
-    if len(held):
-        fix_b = used[pairs.step[held] + 1]
-        a_row, b_row = pairs.a[held], pairs.b[held]
-        at_a = np.hypot(fixes.x[fix_b] - cands.x[a_row], fixes.y[fix_b] - cands.y[a_row])
-        sigma_b = fixes.sigma_m[fix_b]
-        # never better than b's own emission: holding is an explanation of b, not a bonus
-        extra = np.minimum(
-            distance_emission(at_a, sigma_b, config)
-            - distance_emission(cands.distance_m[b_row], sigma_b, config),
-            0.0,
-        )
-        zero = np.zeros(len(held))
-        consider(held, zero, zero, ROUTE_STANDSTILL, extra)
+    f8 = np.float64
+    travel_m = slack_m = np.empty(0)
+    if fixes.travel is not None:
+        travel_m, slack_m = fixes.travel.between(used)
+    heading = np.empty(0) if fixes.heading_deg is None else fixes.heading_deg[used]
+    args = (
+        *route_inputs(net),
+        net.arrays.edge_speed_mps,
+        cands.edge, cands.offset_m, cands.distance_m, cands.x, cands.y,
+        pairs.step, pairs.a, pairs.b, np.ascontiguousarray(bounds_m, f8),
+        np.ascontiguousarray(step_m, f8),
+        np.ascontiguousarray(np.diff(fixes.time_s[used]), f8),
+        np.ascontiguousarray(fixes.sigma_m[used], f8),
+        np.ascontiguousarray(fixes.x[used], f8),
+        np.ascontiguousarray(fixes.y[used], f8),
+        np.ascontiguousarray(travel_m, f8), np.ascontiguousarray(slack_m, f8),
+        np.ascontiguousarray(heading, f8),
+        np.ascontiguousarray(fixes.speed_mps[used], f8),
+        model_params(config),
+    )  # fmt: skip
+    out = transitions_kernel(*args)
+    lt, kind = out[0], out[1]
+    routes = routes_found(net, cands.edge[pairs.a], cands.edge[pairs.b], out[2:])
     return lt, kind, routes

@@ -11,21 +11,156 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numba import njit
 
-from mapmatch.hmm.emission import emissions
-from mapmatch.hmm.routes import candidate_pairs, route_search_bounds
+from mapmatch.hmm.candidates import Candidates
+from mapmatch.hmm.emission import distance_score, heading_score, speed_weight
+from mapmatch.hmm.observations import between_kernel, travel_arrays
+from mapmatch.hmm.params import P_CANDIDATE_MARGIN, P_MIN_LOG_TRANSITION, model_params
+from mapmatch.hmm.routes import pairs_kernel, search_bound
 from mapmatch.hmm.solution import Solution
-from mapmatch.hmm.transition import transitions
-from mapmatch.hmm.viterbi import posteriors, viterbi
+from mapmatch.hmm.transition import route_inputs, routes_found, transitions_kernel
+from mapmatch.hmm.viterbi import _posterior_kernel, _viterbi_kernel
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
-    from mapmatch.hmm.candidates import Candidates
     from mapmatch.hmm.observations import Observations
-    from mapmatch.types import BoolArray, IntArray
+    from mapmatch.types import BoolArray, FloatArray, IntArray
     from roadnets import RoadNetwork
 
-__all__ = ["cuts", "isolated", "repair_breaks", "solve"]
+__all__ = [
+    "cuts",
+    "isolated",
+    "model_fixes",
+    "observation_arrays",
+    "repair_breaks",
+    "solve",
+    "solve_kernel",
+]
+
+
+@njit(cache=True, nogil=True)
+def _pieces(states, starts):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """``(start, stop)`` of each connected piece of a Viterbi path (as :func:`viterbi` gives)."""
+    n = len(states)
+    lo = np.empty(n, dtype=np.int64)
+    hi = np.empty(n, dtype=np.int64)
+    m = 0
+    for start in range(n):
+        if not (starts[start] and states[start] >= 0):
+            continue
+        stop = start + 1
+        while stop < n and states[stop] >= 0 and not starts[stop]:
+            stop += 1
+        lo[m], hi[m] = start, stop
+        m += 1
+    return lo[:m], hi[:m]
+
+
+@njit(cache=True, nogil=True)
+def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    routing, edge_speed, cands, used, cut_after, obs, travel, params
+):
+    """
+    :func:`solve` in one call, routes searched inside.
+
+    The used observations' candidates and emissions, the margin, the pairs and their
+    transitions, the padded trellis, Viterbi and forward-backward. ``routing`` is
+    :func:`~mapmatch.hmm.transition.route_inputs`, ``cands`` the seven arrays of every
+    observation's :class:`Candidates`, ``obs`` the observations' ``(x, y, time, sigma,
+    speed, heading)`` (heading empty when unknown), ``travel`` their
+    :func:`~mapmatch.hmm.observations.travel_arrays`.
+    """
+    graph, ws, scratch, uturn_cost_m, table = routing
+    c_ptr, c_edge, c_off, c_dist, c_x, c_y, c_bear = cands
+    ox, oy, otime, osigma, ospeed, oheading = obs
+    n = len(used)
+    has_heading = len(oheading) > 0
+    # the used observations' candidates and emissions, those within the margin of the best
+    total = 0
+    for i in range(n):
+        total += c_ptr[used[i] + 1] - c_ptr[used[i]]
+    rows = np.empty(total, dtype=np.int64)
+    em_all = np.empty(total)
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    margin = params[P_CANDIDATE_MARGIN]
+    m = 0
+    for i in range(n):
+        u = used[i]
+        lo, hi = c_ptr[u], c_ptr[u + 1]
+        best = -np.inf
+        weight = speed_weight(ospeed[u], params) if has_heading else 0.0
+        for r in range(lo, hi):
+            e = distance_score(c_dist[r], osigma[u], params)
+            if has_heading:
+                e += heading_score(oheading[u], c_bear[r], weight, params)
+            em_all[r - lo + m] = e
+            best = max(best, e)
+        kept = m
+        for r in range(lo, hi):
+            e = em_all[r - lo + m]
+            if margin <= 0 or e >= best - margin:
+                rows[kept] = r
+                em_all[kept] = e
+                kept += 1
+        m = kept
+        ptr[i + 1] = m
+    rows, em = rows[:m], em_all[:m]
+    edge, off, dist = c_edge[rows], c_off[rows], c_dist[rows]
+    cx, cy, bear = c_x[rows], c_y[rows], c_bear[rows]
+    # the pairs of consecutive observations' candidates and their transitions
+    step_m = np.empty(max(n - 1, 0))
+    dt = np.empty(max(n - 1, 0))
+    for i in range(n - 1):
+        u, v = used[i], used[i + 1]
+        step_m[i] = np.hypot(ox[v] - ox[u], oy[v] - oy[u])
+        dt[i] = otime[v] - otime[u]
+    step, a, b, a_rank, b_rank = pairs_kernel(ptr)
+    bounds = np.empty(len(step))
+    for k in range(len(step)):
+        bounds[k] = search_bound(step_m[step[k]], dt[step[k]], params)
+    odometer, speed_m, slack_m, unknown_lo, unknown_hi = travel
+    if len(odometer) or len(speed_m):
+        travel_m, slack = between_kernel(used, odometer, speed_m, slack_m, unknown_lo, unknown_hi)
+    else:
+        travel_m, slack = np.empty(0), np.empty(0)
+    heading = oheading[used] if has_heading else oheading
+    lt, kind, fits, searched, rec, r_dist, r_time, r_turns = transitions_kernel(
+        graph, ws, scratch, uturn_cost_m, table, edge_speed,
+        edge, off, dist, cx, cy, step, a, b, bounds,
+        step_m, dt, osigma[used], ox[used], oy[used], travel_m, slack, heading, ospeed[used],
+        params,
+    )  # fmt: skip
+    # the padded trellis
+    width = 1
+    for i in range(n):
+        width = max(width, ptr[i + 1] - ptr[i])
+    em_pad = np.full((n, width), -np.inf)
+    for i in range(n):
+        for r in range(ptr[i], ptr[i + 1]):
+            em_pad[i, r - ptr[i]] = em[r]
+    tr_pad = np.full((max(n - 1, 0), width, width), -np.inf)
+    kinds = np.full((max(n - 1, 0), width, width), -1, dtype=np.int64)
+    floor = params[P_MIN_LOG_TRANSITION]
+    for k in range(len(step)):
+        t = step[k]
+        score = lt[k]
+        if cut_after[t] or score < floor:
+            score = -np.inf
+        tr_pad[t, a_rank[k], b_rank[k]] = score
+        kinds[t, a_rank[k], b_rank[k]] = kind[k]
+    if n:
+        states, starts, _ = _viterbi_kernel(em_pad, tr_pad)
+    else:
+        states, starts = np.empty(0, dtype=np.int64), np.zeros(0, dtype=np.bool_)
+    piece_lo, piece_hi = _pieces(states, starts)
+    post = _posterior_kernel(em_pad, tr_pad, piece_lo, piece_hi)
+    return (
+        (ptr, edge, off, dist, cx, cy, bear),
+        states, piece_lo, piece_hi, post, kinds, em_pad, tr_pad,
+        (fits, searched, rec, r_dist, r_time, r_turns),
+        edge[a], edge[b],
+    )  # fmt: skip
 
 
 def solve(
@@ -37,34 +172,79 @@ def solve(
     config: MatchConfig,
 ) -> Solution:
     """Score the trellis over the ``used`` fixes and find the best sequence."""
-    cands = all_cands.subset(used)
-    n = len(used)
-    point_of = np.repeat(np.arange(n), cands.counts)
-    em = emissions(fixes, cands, used[point_of], config)
-    if config.candidate_margin > 0:
-        best_em = np.full(n, -np.inf)
-        np.maximum.at(best_em, point_of, em)
-        keep = em >= best_em[point_of] - config.candidate_margin
-        cands, em = cands.take(keep), em[keep]
-        point_of = point_of[keep]
+    c = all_cands
+    out = solve_kernel(
+        route_inputs(net),
+        net.arrays.edge_speed_mps,
+        (c.ptr, c.edge, c.offset_m, c.distance_m, c.x, c.y, c.bearing_deg),
+        np.ascontiguousarray(used, dtype=np.int64),
+        np.ascontiguousarray(cut_after, dtype=np.bool_),
+        observation_arrays(fixes),
+        travel_arrays(fixes.travel),
+        model_params(config),
+    )
+    cand_arrays, states, piece_lo, piece_hi, post, kinds, em_pad, tr_pad, found, ea, eb = out
+    cands = Candidates(*cand_arrays)
+    pieces = list(zip(piece_lo.tolist(), piece_hi.tolist(), strict=True))
+    routes = routes_found(net, ea, eb, found)
+    return Solution(used, cands, states, pieces, post, kinds, routes, em_pad, tr_pad)
 
-    step_m = np.hypot(np.diff(fixes.x[used]), np.diff(fixes.y[used]))
-    pairs = candidate_pairs(cands.ptr)
-    dt = np.diff(fixes.time_s[used])
-    bounds = route_search_bounds(step_m, dt, config)[pairs.step]
-    lt, kind, routes = transitions(net, fixes, cands, pairs, bounds, used, step_m, config)
-    lt[cut_after[pairs.step] | (lt < config.min_log_transition)] = -np.inf
 
-    width = max(int(cands.counts.max()) if n else 1, 1)
-    em_pad = np.full((n, width), -np.inf)
-    em_pad[point_of, np.arange(len(cands)) - cands.ptr[point_of]] = em
-    tr_pad = np.full((max(n - 1, 0), width, width), -np.inf)
-    tr_pad[pairs.step, pairs.a_rank, pairs.b_rank] = lt
-    kinds = np.full(tr_pad.shape, -1, dtype=np.int64)
-    kinds[pairs.step, pairs.a_rank, pairs.b_rank] = kind
-    best = viterbi(em_pad, tr_pad)
-    post = posteriors(em_pad, tr_pad, best.pieces)
-    return Solution(used, cands, best.states, best.pieces, post, kinds, routes, em_pad, tr_pad)
+def observation_arrays(obs: Observations) -> tuple[FloatArray, ...]:
+    """``(x, y, time, sigma, speed, heading)`` of the observations (heading empty: unknown)."""
+    heading = np.empty(0) if obs.heading_deg is None else obs.heading_deg
+    f8 = np.float64
+    return tuple(
+        np.ascontiguousarray(v, f8)
+        for v in (obs.x, obs.y, obs.time_s, obs.sigma_m, obs.speed_mps, heading)
+    )
+
+
+@njit(cache=True, nogil=True)
+def _model_fixes(ptr, outlier, segment_starts, first):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """:func:`model_fixes` over arrays."""
+    n = len(first)
+    used = np.empty(n, dtype=np.int64)
+    missing_before = np.empty(n, dtype=np.int64)
+    m = 0
+    missing = 0
+    for k in range(n):
+        has = ptr[k + 1] > ptr[k]
+        if not has:
+            lone = (k == 0 or ptr[k] > ptr[k - 1]) and (k == n - 1 or ptr[k + 2] > ptr[k + 1])
+            if not lone:
+                missing += 1
+        elif not outlier[k]:
+            used[m] = k
+            m += 1
+        segment = np.searchsorted(segment_starts, first[k], side="right")
+        missing_before[k] = missing + segment
+    used = used[:m]
+    cut_after = np.empty(max(m - 1, 0), dtype=np.bool_)
+    for i in range(m - 1):
+        cut_after[i] = missing_before[used[i + 1]] > missing_before[used[i]]
+    return used, missing_before, cut_after
+
+
+def model_fixes(
+    cands: Candidates, outlier: BoolArray, segment_starts: IntArray, first: IntArray
+) -> tuple[IntArray, IntArray, BoolArray]:
+    """
+    The observations the model uses, the breaks before each, and where the trellis is cut.
+
+    ``used`` are the observations with a candidate that are not outliers; ``missing_before``
+    counts, for each observation, the stretches of observations without a road nearby (not
+    a lone stray one, :func:`isolated`) and the starts of new trace segments (a GPX trkseg,
+    ``segment_starts``) before it; ``cut_after`` marks the used observations after which one
+    of those lies (:func:`cuts`): the trace splits there.
+    """
+    used, missing_before, cut_after = _model_fixes(
+        cands.ptr,
+        np.ascontiguousarray(outlier, dtype=np.bool_),
+        np.ascontiguousarray(segment_starts, dtype=np.int64),
+        first,
+    )
+    return used, missing_before, cut_after
 
 
 def cuts(used: IntArray, missing_before: IntArray) -> BoolArray:

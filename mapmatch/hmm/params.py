@@ -1,0 +1,95 @@
+"""The matcher parameters the compiled stages read, as one float array per configuration.
+
+The kernels of :mod:`mapmatch.hmm` take the parameters they need as ``params[P_...]`` from
+:func:`model_params` (numba reads the ``P_`` indices as constants), so that a stage call passes
+one array instead of a dozen floats.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from mapmatch.config import MatchConfig
+    from mapmatch.types import FloatArray
+
+__all__ = ["PARAMS", "model_params"]
+
+#: The fields of :class:`~mapmatch.config.MatchConfig` in the parameter array, in order.
+PARAMS = (
+    "max_emission_penalty",
+    "heading_sigma_deg",
+    "heading_min_speed_mps",
+    "heading_full_speed_mps",
+    "heading_max_penalty",
+    "candidate_margin",
+    "nominal_speed_mps",
+    "beta_m",
+    "beta_per_s",
+    "beta_per_sigma",
+    "speed_factor",
+    "speed_margin_mps",
+    "speed_sigma_mps",
+    "travel_tolerance_m",
+    "travel_tolerance_frac",
+    "travel_beta_m",
+    "uturn_penalty",
+    "uturn_evidence_penalty",
+    "standstill_m",
+    "standstill_sigmas",
+    "min_log_transition",
+    "route_factor",
+    "route_slack_m",
+    "route_reach_mps",
+)
+(
+    P_MAX_EMISSION_PENALTY,
+    P_HEADING_SIGMA,
+    P_HEADING_MIN_SPEED,
+    P_HEADING_FULL_SPEED,
+    P_HEADING_MAX_PENALTY,
+    P_CANDIDATE_MARGIN,
+    P_NOMINAL_SPEED,
+    P_BETA_M,
+    P_BETA_PER_S,
+    P_BETA_PER_SIGMA,
+    P_SPEED_FACTOR,
+    P_SPEED_MARGIN,
+    P_SPEED_SIGMA,
+    P_TRAVEL_TOLERANCE_M,
+    P_TRAVEL_TOLERANCE_FRAC,
+    P_TRAVEL_BETA,
+    P_UTURN_PENALTY,
+    P_UTURN_EVIDENCE_PENALTY,
+    P_STANDSTILL_M,
+    P_STANDSTILL_SIGMAS,
+    P_MIN_LOG_TRANSITION,
+    P_ROUTE_FACTOR,
+    P_ROUTE_SLACK,
+    P_ROUTE_REACH,
+) = range(len(PARAMS))
+
+_CACHE: dict[int, tuple[MatchConfig, FloatArray]] = {}
+
+
+def model_params(config: MatchConfig) -> FloatArray:
+    """
+    The parameter array of ``config`` (made once per configuration object, read-only).
+
+    Examples
+    --------
+    >>> from mapmatch.config import MatchConfig
+    >>> float(model_params(MatchConfig(beta_m=4.0))[P_BETA_M])
+    4.0
+    """
+    found = _CACHE.get(id(config))
+    if found is not None and found[0] is config:
+        return found[1]
+    params = np.array([float(getattr(config, name)) for name in PARAMS], dtype=np.float64)
+    params.flags.writeable = False
+    if len(_CACHE) >= 64:
+        _CACHE.pop(next(iter(_CACHE)))
+    _CACHE[id(config)] = (config, params)
+    return params

@@ -1,0 +1,494 @@
+"""The path of each solved piece, walked transition by transition (compiled).
+
+:mod:`mapmatch.hmm.assemble` describes the rules: the path only moves forward from its front,
+a held fix leaves it where it is, a move that starts behind the front and turns off before it
+cuts the path back, a mid-road U-turn turns where the fixes in between reached. This module
+is those rules as one compiled walk over every piece of a solution (:func:`walk_pieces`),
+its stretches kept in flat arrays instead of lists; the Python functions in
+:mod:`mapmatch.hmm.assemble` and :mod:`mapmatch.hmm.loops` read what it gives.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from mapmatch.hmm.observations import between_kernel
+from mapmatch.hmm.routes import ROUTE_SAME_EDGE, ROUTE_STANDSTILL, ROUTE_UTURN
+from mapmatch.hmm.transition import _pair_routes
+
+__all__ = [
+    "EPS_M",
+    "point_on_edge",
+    "project_kernel",
+    "stretch_vertices",
+    "walk_pieces",
+]
+
+#: Two places this close (metres) along a road are one.
+EPS_M = 1e-6
+
+
+@njit(cache=True, nogil=True)
+def point_on_edge(edge, offset, edge_len, geom_ptr, geom_x, geom_y, geom_cum, vertex_pos):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """:meth:`RoadNetwork.point_on_edge <roadnets.RoadNetwork.point_on_edge>` of one place."""
+    offset = min(max(offset, 0.0), edge_len[edge])
+    base = vertex_pos[geom_ptr[edge]]
+    i = np.searchsorted(vertex_pos, base + offset, side="right") - 1
+    i = min(max(i, geom_ptr[edge]), geom_ptr[edge + 1] - 2)
+    seg = geom_cum[i + 1] - geom_cum[i]
+    t = (offset - geom_cum[i]) / seg if seg > 0 else 0.0
+    t = min(max(t, 0.0), 1.0)
+    return geom_x[i] + t * (geom_x[i + 1] - geom_x[i]), geom_y[i] + t * (geom_y[i + 1] - geom_y[i])
+
+
+@njit(cache=True, nogil=True)
+def stretch_vertices(edge, start_m, end_m, geom):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    Vertices of a path of edge stretches with their distance along it, in order.
+
+    The stretches' ends (interpolated) and the edges' vertices between them; ``geom`` is
+    ``(edge_len, geom_ptr, geom_x, geom_y, geom_cum, vertex_pos)``. Where two have the same
+    distance, a stretch's start comes before the vertices, and they before its end.
+    """
+    geom_ptr, geom_x, geom_y, geom_cum = geom[1], geom[2], geom[3], geom[4]
+    n = len(edge)
+    base = np.empty(n)
+    acc = 0.0
+    inner = 0
+    for i in range(n):
+        base[i] = acc
+        acc += end_m[i] - start_m[i]
+        for v in range(geom_ptr[edge[i]], geom_ptr[edge[i] + 1]):
+            if start_m[i] < geom_cum[v] < end_m[i]:
+                inner += 1
+    total = 2 * n + inner
+    x = np.empty(total)
+    y = np.empty(total)
+    along = np.empty(total)
+    for i in range(n):
+        x[i], y[i] = point_on_edge(edge[i], start_m[i], *geom)
+        along[i] = base[i]
+        k = n + inner + i
+        x[k], y[k] = point_on_edge(edge[i], end_m[i], *geom)
+        along[k] = base[i] + end_m[i] - start_m[i]
+    k = n
+    for i in range(n):
+        for v in range(geom_ptr[edge[i]], geom_ptr[edge[i] + 1]):
+            if start_m[i] < geom_cum[v] < end_m[i]:
+                x[k], y[k] = geom_x[v], geom_y[v]
+                along[k] = base[i] + geom_cum[v] - start_m[i]
+                k += 1
+    order = np.argsort(along, kind="mergesort")
+    return x[order], y[order], along[order]
+
+
+@njit(cache=True, nogil=True)
+def project_kernel(px, py, lo, hi, vx, vy, va):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Nearest point of a polyline (vertices ``vx, vy`` at distances ``va``) within [lo, hi]."""
+    n = len(px)
+    along = np.empty(n)
+    dist = np.empty(n)
+    nv = len(va)
+    for i in range(n):
+        best_d = np.inf
+        best_a = lo[i]
+        k0 = max(np.searchsorted(va, lo[i], side="right") - 1, 0)
+        k1 = min(np.searchsorted(va, hi[i], side="left"), nv - 1)
+        if nv == 1 or k0 >= k1:
+            k = min(k0, nv - 1)
+            best_a = min(max(va[k], lo[i]), hi[i])
+            best_d = np.hypot(px[i] - vx[k], py[i] - vy[k])
+        for k in range(k0, k1):
+            seg = va[k + 1] - va[k]
+            ax, ay = vx[k], vy[k]
+            dx, dy = vx[k + 1] - ax, vy[k + 1] - ay
+            d2 = dx * dx + dy * dy
+            t = ((px[i] - ax) * dx + (py[i] - ay) * dy) / d2 if d2 > 0 and seg > 0 else 0.0
+            a = va[k] + min(max(t, 0.0), 1.0) * seg
+            a = min(max(a, lo[i]), hi[i])
+            f = (a - va[k]) / seg if seg > 0 else 0.0
+            qx, qy = ax + f * dx, ay + f * dy
+            d = np.hypot(px[i] - qx, py[i] - qy)
+            if d < best_d:
+                best_d = d
+                best_a = a
+        along[i] = best_a
+        dist[i] = best_d
+    return along, dist
+
+
+@njit(cache=True, nogil=True)
+def _farthest_reached(edge, from_m, x, y, radius, geom):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Farthest offset along ``edge`` (beyond ``from_m``) that fixes within their radius reach."""
+    if len(x) == 0:
+        return from_m
+    length = geom[0][edge]
+    one = np.array([edge])
+    vx, vy, va = stretch_vertices(one, np.array([0.0]), np.array([length]), geom)
+    n = len(x)
+    along, dist = project_kernel(x, y, np.full(n, from_m), np.full(n, length), vx, vy, va)
+    best = -np.inf
+    for i in range(n):
+        if dist[i] <= radius[i] and along[i] > best:
+            best = along[i]
+    return best if best > -np.inf else from_m
+
+
+@njit(cache=True, nogil=True)
+def _ensure(e, lo, hi, size):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """The row arrays grown to hold ``size`` rows."""
+    if size <= len(e):
+        return e, lo, hi
+    cap = max(2 * len(e), size)
+    e2 = np.empty(cap, dtype=np.int64)
+    lo2 = np.empty(cap)
+    hi2 = np.empty(cap)
+    e2[: len(e)] = e
+    lo2[: len(e)] = lo
+    hi2[: len(e)] = hi
+    return e2, lo2, hi2
+
+
+@njit(cache=True, nogil=True)
+def _route_edges(rec, r_state, r_pred, state_edge, out, start):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """The edges strictly between a route's ends (its record's predecessors), into ``out``."""
+    count = 0
+    r = r_pred[rec]
+    while r >= 0:
+        count += 1
+        r = r_pred[r]
+    if start + count > len(out):
+        grown = np.empty(max(2 * len(out), start + count), dtype=np.int64)
+        grown[:start] = out[:start]
+        out = grown
+    r = r_pred[rec]
+    k = start + count - 1
+    while r >= 0:
+        out[k] = state_edge[r_state[r]]
+        k -= 1
+        r = r_pred[r]
+    return out, count
+
+
+@njit(cache=True, nogil=True)
+def _behind(edge, offset, front_edge, front, limit, edge_len, routing):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Whether a place lies at most ``limit`` behind the path's front along the road."""
+    if edge == front_edge:
+        return offset <= front + EPS_M
+    ahead = edge_len[edge] - offset + front
+    if ahead > limit:
+        return False
+    graph, ws, scratch, uturn_cost_m, table = routing
+    _, _, _, dist, _, _ = _pair_routes(
+        graph, ws, scratch, uturn_cost_m, table,
+        np.array([edge]), np.array([front_edge]), np.array([limit - ahead]),
+    )  # fmt: skip
+    return ahead + dist[0] <= limit
+
+
+@njit(cache=True, nogil=True)
+def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    solution, obs, fixes, travel, net, routing, hold_limit
+):
+    """
+    The stretches driven through every piece of a solution, and where each fix of it is.
+
+    ``solution`` is ``(cand ptr, edge, offset, states, kinds, piece starts, piece stops,
+    used, pair records, route states, route predecessors)``, ``obs`` the observations'
+    ``(first, stop, time)``, ``fixes`` every fix's ``(x, y, radius)``, ``travel`` the
+    observations' travel arrays, ``net`` ``(edge_len, edge_speed, edge_u, edge_v, edge_twin,
+    out_ptr, state_edge, geom)`` (``geom`` as :func:`stretch_vertices` reads it).
+
+    Returns ``(row_ptr, edge, lo, hi, along, jumps, loop)``: the stretches of piece ``p``
+    are rows ``row_ptr[p]:row_ptr[p + 1]``, ``along`` holds the distance along its path of
+    each of its used observations (in solution order), ``jumps`` the moves drawn as jumps,
+    ``loop`` whether the path may hold a loop for :func:`~mapmatch.hmm.loops.collapse_loops`
+    to price.
+    """
+    c_ptr, c_edge, c_off, states, kinds, p_lo, p_hi, used, pair_rec, r_state, r_pred = solution
+    o_first, o_stop, o_time = obs
+    fx, fy, fradius = fixes
+    edge_len, edge_speed, edge_u, edge_v, edge_twin, out_ptr, state_edge, geom = net
+    odometer, speed_m, slack_m, unknown_lo, unknown_hi = travel
+    n_pieces = len(p_lo)
+    n_used = len(used)
+    # the pair index of each step's first pair (pairs: by step, then a, then b)
+    pair_first = np.zeros(max(n_used, 1), dtype=np.int64)
+    for t in range(n_used - 1):
+        pair_first[t + 1] = pair_first[t] + (c_ptr[t + 1] - c_ptr[t]) * (
+            c_ptr[t + 2] - c_ptr[t + 1]
+        )
+    row_ptr = np.zeros(n_pieces + 1, dtype=np.int64)
+    out_e, out_lo, out_hi = np.empty(64, dtype=np.int64), np.empty(64), np.empty(64)
+    along_all = np.empty(n_used)
+    jumps = np.zeros(n_pieces, dtype=np.int64)
+    loop = np.zeros(n_pieces, dtype=np.bool_)
+    path_e, path_lo, path_hi = np.empty(64, dtype=np.int64), np.empty(64), np.empty(64)
+    move_e, move_lo, move_hi = np.empty(64, dtype=np.int64), np.empty(64), np.empty(64)
+    tail_e, tail_lo, tail_hi = np.empty(64, dtype=np.int64), np.empty(64), np.empty(64)
+    via = np.empty(64, dtype=np.int64)
+    n_out = 0
+    has_travel = len(odometer) > 0 or len(speed_m) > 0
+    for p in range(n_pieces):
+        start, stop = p_lo[p], p_hi[p]
+        # the travel between consecutive observations, only where it says something
+        piece_travel = np.full(max(stop - start - 1, 0), np.nan)
+        if has_travel:
+            dist_t, slack_t = between_kernel(
+                used[start:stop], odometer, speed_m, slack_m, unknown_lo, unknown_hi
+            )
+            for k in range(len(piece_travel)):
+                if slack_t[k] <= 0.25 * dist_t[k]:
+                    piece_travel[k] = dist_t[k]
+        row0 = c_ptr[start] + states[start]
+        n_path = 1
+        path_e[0], path_lo[0], path_hi[0] = c_edge[row0], c_off[row0], c_off[row0]
+        done = 0.0
+        along_all[start] = 0.0
+        for t in range(start, stop - 1):
+            ra, rb = c_ptr[t] + states[t], c_ptr[t + 1] + states[t + 1]
+            ea, eb = c_edge[ra], c_edge[rb]
+            oa, ob = c_off[ra], c_off[rb]
+            move = kinds[t, states[t], states[t + 1]]
+            front_edge, front = path_e[n_path - 1], path_hi[n_path - 1]
+            # the move's stretches
+            n_move = 0
+            if move == ROUTE_STANDSTILL:
+                n_move = 0
+            elif move == ROUTE_SAME_EDGE:
+                move_e[0], move_lo[0], move_hi[0] = ea, oa, ob
+                n_move = 1
+            elif move == ROUTE_UTURN:
+                length = edge_len[ea]
+                turn = max(oa, length - ob)
+                if front_edge == ea:
+                    turn = max(turn, front)
+                lo_f, hi_f = o_first[used[t]], o_stop[used[t + 1]]
+                turn = max(
+                    turn,
+                    _farthest_reached(
+                        ea, turn, fx[lo_f:hi_f], fy[lo_f:hi_f], fradius[lo_f:hi_f], geom
+                    ),
+                )
+                node = edge_v[ea]
+                to_end = (length - oa) + ob  # out to the end and back to b
+                dt = o_time[used[t + 1]] - o_time[used[t]]
+                timed_reach = edge_speed[ea] * dt  # NaN without times
+                travel_t = piece_travel[t - start]
+                if np.isfinite(travel_t):  # out to the turn and back covers the travel
+                    turn = max(turn, 0.5 * (travel_t + oa + length - ob))
+                    timed_reach = np.nan  # the travel says where it turned
+                if out_ptr[node + 1] - out_ptr[node] <= 1 and (
+                    length - turn <= 0.5 * hold_limit or to_end <= timed_reach
+                ):
+                    # a dead end is driven to its end, where there is room to turn, unless the
+                    # time between the fixes is too short to get there and back at its limit
+                    turn = length
+                turn = min(turn, length)
+                move_e[0], move_lo[0], move_hi[0] = ea, oa, turn
+                move_e[1], move_lo[1], move_hi[1] = eb, length - turn, ob
+                n_move = 2
+            else:
+                rec = pair_rec[
+                    pair_first[t] + states[t] * (c_ptr[t + 2] - c_ptr[t + 1]) + states[t + 1]
+                ]
+                via, n_via = _route_edges(rec, r_state, r_pred, state_edge, via, 0)
+                move_e, move_lo, move_hi = _ensure(move_e, move_lo, move_hi, n_via + 2)
+                move_e[0], move_lo[0], move_hi[0] = ea, oa, edge_len[ea]
+                for k in range(n_via):
+                    e = via[k]
+                    move_e[k + 1], move_lo[k + 1], move_hi[k + 1] = e, 0.0, edge_len[e]
+                move_e[n_via + 1], move_lo[n_via + 1], move_hi[n_via + 1] = eb, 0.0, ob
+                n_move = n_via + 2
+            if n_move:
+                tail_e, tail_lo, tail_hi = _ensure(tail_e, tail_lo, tail_hi, n_move + 2)
+                status, n_tail = _continue_from(
+                    path_e[n_path - 1], path_lo[n_path - 1], path_hi[n_path - 1],
+                    move_e, move_lo, move_hi, n_move, tail_e, tail_lo, tail_hi,
+                    front_edge, front, hold_limit, edge_len, edge_u, edge_v, routing,
+                )  # fmt: skip
+                if status < 0:  # the move starts behind the front and turns off before it
+                    n_path, done = _retract(
+                        path_e, path_lo, path_hi, n_path, done, move_e[0], move_lo[0], hold_limit
+                    )
+                    status, n_tail = _continue_from(
+                        path_e[n_path - 1], path_lo[n_path - 1], path_hi[n_path - 1],
+                        move_e, move_lo, move_hi, n_move, tail_e, tail_lo, tail_hi,
+                        front_edge, front, hold_limit, edge_len, edge_u, edge_v, routing,
+                    )  # fmt: skip
+                if status < 0:  # nowhere on the path: drawn as a jump
+                    jumps[p] += 1
+                    tail_e[0], tail_lo[0], tail_hi[0] = (
+                        path_e[n_path - 1],
+                        path_lo[n_path - 1],
+                        path_hi[n_path - 1],
+                    )
+                    for k in range(n_move):
+                        tail_e[k + 1], tail_lo[k + 1], tail_hi[k + 1] = (
+                            move_e[k],
+                            move_lo[k],
+                            move_hi[k],
+                        )
+                    n_tail = n_move + 1
+                    status = 0
+                drop = status == 1
+                if drop and n_tail:  # leave the front's node on another edge
+                    if n_path > 1:
+                        n_path -= 1
+                        done -= path_hi[n_path - 1] - path_lo[n_path - 1]
+                        for k in range(n_tail, 0, -1):
+                            tail_e[k], tail_lo[k], tail_hi[k] = (
+                                tail_e[k - 1],
+                                tail_lo[k - 1],
+                                tail_hi[k - 1],
+                            )
+                        tail_e[0], tail_lo[0], tail_hi[0] = (
+                            path_e[n_path - 1],
+                            path_lo[n_path - 1],
+                            path_hi[n_path - 1],
+                        )
+                        n_tail += 1
+                    else:
+                        path_e[0], path_lo[0], path_hi[0] = tail_e[0], tail_lo[0], tail_hi[0]
+                if n_tail:
+                    path_hi[n_path - 1] = tail_hi[0]
+                    path_e, path_lo, path_hi = _ensure(path_e, path_lo, path_hi, n_path + n_tail)
+                    for k in range(1, n_tail):
+                        done += path_hi[n_path - 1] - path_lo[n_path - 1]
+                        path_e[n_path], path_lo[n_path], path_hi[n_path] = (
+                            tail_e[k],
+                            tail_lo[k],
+                            tail_hi[k],
+                        )
+                        n_path += 1
+            along_all[t + 1] = done + path_hi[n_path - 1] - path_lo[n_path - 1]
+        loop[p] = _may_loop(path_e, path_lo, path_hi, n_path, edge_len, edge_u, edge_v, edge_twin)
+        out_e, out_lo, out_hi = _ensure(out_e, out_lo, out_hi, n_out + n_path)
+        out_e[n_out : n_out + n_path] = path_e[:n_path]
+        out_lo[n_out : n_out + n_path] = path_lo[:n_path]
+        out_hi[n_out : n_out + n_path] = path_hi[:n_path]
+        n_out += n_path
+        row_ptr[p + 1] = n_out
+    return (
+        row_ptr,
+        out_e[:n_out].copy(),
+        out_lo[:n_out].copy(),
+        out_hi[:n_out].copy(),
+        along_all,
+        jumps,
+        loop,
+    )
+
+
+@njit(cache=True, nogil=True)
+def _continue_from(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    edge, front_lo, front, move_e, move_lo, move_hi, n_move, tail_e, tail_lo, tail_hi,
+    behind_edge, behind_front, limit, edge_len, edge_u, edge_v, routing,
+):  # fmt: skip
+    """
+    The part of a move beyond the path's front ``(edge, front_lo, front)``, into ``tail``.
+
+    The front is a place on an edge; at the edge's start or end it is also the node there,
+    which a move may pass on other edges. Returns ``(status, n_tail)``: status 1 when the
+    front's own (empty) stretch is to be dropped (the move leaves the front's node on another
+    edge), 0 when not, -1 when the move never passes the front; the tail's first stretch
+    continues the front's. No tail (status 0) when the move ends at most ``limit`` behind
+    the front as it was before any cut (``behind_edge``, ``behind_front``): the car holds.
+    """
+    at_start = front <= EPS_M and front_lo <= EPS_M
+    at_end = front >= edge_len[edge] - EPS_M
+    for k in range(n_move):
+        ek, start, end = move_e[k], move_lo[k], move_hi[k]
+        if ek == edge and start - EPS_M <= front <= end + EPS_M:
+            tail_e[0], tail_lo[0], tail_hi[0] = ek, front, max(front, end)
+            n = 1
+            for j in range(k + 1, n_move):
+                tail_e[n], tail_lo[n], tail_hi[n] = move_e[j], move_lo[j], move_hi[j]
+                n += 1
+            return 0, n
+        if at_end and start <= EPS_M and edge_u[ek] == edge_v[edge]:
+            tail_e[0], tail_lo[0], tail_hi[0] = edge, front, front
+            n = 1
+            for j in range(k, n_move):
+                tail_e[n], tail_lo[n], tail_hi[n] = move_e[j], move_lo[j], move_hi[j]
+                n += 1
+            return 0, n
+        if at_start and end >= edge_len[ek] - EPS_M and edge_v[ek] == edge_u[edge]:
+            n = 0
+            for j in range(k + 1, n_move):
+                tail_e[n], tail_lo[n], tail_hi[n] = move_e[j], move_lo[j], move_hi[j]
+                n += 1
+            return 1, n
+    last = n_move - 1
+    if _behind(move_e[last], move_hi[last], behind_edge, behind_front, limit, edge_len, routing):
+        return 0, 0
+    return -1, 0
+
+
+@njit(cache=True, nogil=True)
+def _retract(path_e, path_lo, path_hi, n_path, done, edge, offset, limit):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    Cut the path back to where a move starts, if that place is on it: ``(n_path, done)``.
+
+    A move that starts behind the path's front and turns off before reaching it shows that
+    the stretch beyond its start came from a scattered fix: the car never drove it.
+    """
+    cut = 0.0  # length of path beyond the place looked at
+    for k in range(n_path - 1, -1, -1):
+        lo, hi = path_lo[k], path_hi[k]
+        if path_e[k] == edge and lo - EPS_M <= offset <= hi + EPS_M:
+            if cut + hi - offset > limit:
+                break
+            path_hi[k] = max(lo, offset)
+            total = 0.0
+            for j in range(k):
+                total += path_hi[j] - path_lo[j]
+            return k + 1, total
+        cut += hi - lo
+        if cut > limit:
+            break
+    return n_path, done
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _visit(nodes, at, m, node, here):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Add a node passed, unless it repeats the last one passed (the path's node visits)."""
+    if m == 0 or nodes[m - 1] != node or abs(at[m - 1] - here) > EPS_M:
+        nodes[m], at[m] = node, here
+        m += 1
+    return m
+
+
+@njit(cache=True, nogil=True)
+def _may_loop(path_e, path_lo, path_hi, n_path, edge_len, edge_u, edge_v, edge_twin):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    Whether :func:`~mapmatch.hmm.loops.collapse_loops` finds a loop to price in this path.
+
+    The path passes a node twice (at different distances along it), or drives back from a
+    mid-road U-turn over the place where it turned.
+    """
+    nodes = np.empty(2 * n_path, dtype=np.int64)
+    at = np.empty(2 * n_path)
+    m = 0
+    base = 0.0
+    for k in range(n_path):
+        e, lo, hi = path_e[k], path_lo[k], path_hi[k]
+        if lo <= EPS_M:
+            m = _visit(nodes, at, m, edge_u[e], base)
+        base += hi - lo
+        if hi >= edge_len[e] - EPS_M:
+            m = _visit(nodes, at, m, edge_v[e], base)
+    order = np.argsort(nodes[:m], kind="mergesort")
+    for i in range(1, m):
+        j, k = order[i - 1], order[i]
+        if nodes[j] == nodes[k] and at[k] > at[j] + EPS_M:
+            return True
+    for k in range(n_path - 1):
+        e, turn = path_e[k], path_hi[k]
+        if edge_twin[e] != path_e[k + 1] or turn >= edge_len[e] - EPS_M:
+            continue
+        for j in range(k + 2, n_path):
+            if path_e[j] == e and path_lo[j] - EPS_M <= turn <= path_hi[j] + EPS_M:
+                return True
+    return False
