@@ -10,9 +10,9 @@ budget and metrics as ``POST /v1/match``. ``POST`` takes the same options as a f
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Final
+from typing import Any, Final
 
-from fastapi import APIRouter, Path, Request
+from fastapi import APIRouter, Request
 from fastapi.responses import JSONResponse, Response
 
 from api.compat import compat_responses, count_outcome, error_info, run_compat
@@ -63,10 +63,15 @@ _OPTION_DOCS: Final = {
     "network": "This service's own: the network to match on (GET /v1/networks); default the first.",
 }
 _PARAMETERS: Final = [
-    {"name": name, "in": "query", "required": False, "schema": {"type": "string"},
-     "description": _OPTION_DOCS[name]}
+    {
+        "name": name,
+        "in": "query",
+        "required": False,
+        "schema": {"type": "string"},
+        "description": _OPTION_DOCS[name],
+    }
     for name in OPTIONS
-]  # fmt: skip
+]
 _FORM_BODY: Final[dict[str, Any]] = {
     "required": False,
     "description": "The same options as a form (and `coordinates`, without them in the path).",
@@ -75,11 +80,25 @@ _FORM_BODY: Final[dict[str, Any]] = {
 _RESPONSES: Final = compat_responses(
     OsrmMatchResponse, OsrmErrorResponse, "The matchings and tracepoints."
 )
-_VERSION = Path(description="Protocol version: `v1`.")
-_PROFILE = Path(description="`driving` (or `car`): the network's drivable roads.")
-_COORDINATES = Path(
-    description="`{lon},{lat};{lon},{lat}...`, `polyline({polyline})` or "
-    "`polyline6({polyline6})` (URL-encoded), optionally followed by `.json`."
+
+
+def _path_parameter(name: str, description: str) -> dict[str, Any]:
+    return {
+        "name": name,
+        "in": "path",
+        "required": True,
+        "schema": {"type": "string"},
+        "description": description,
+    }
+
+
+# read from the path by the route itself, so that no framework validation answers first
+_VERSION = _path_parameter("version", "Protocol version: `v1`.")
+_PROFILE = _path_parameter("profile", "`driving` (or `car`): the network's drivable roads.")
+_COORDINATES = _path_parameter(
+    "coordinates",
+    "`{lon},{lat};{lon},{lat}...`, `polyline({polyline})` or `polyline6({polyline6})` "
+    "(URL-encoded), optionally followed by `.json`.",
 )
 
 
@@ -91,16 +110,15 @@ _COORDINATES = Path(
     "what maps to what is in the README's HTTP section.",
     response_model=None,
     responses=_RESPONSES,
-    openapi_extra={"parameters": _PARAMETERS, "requestBody": _FORM_BODY},
+    openapi_extra={
+        "parameters": [_VERSION, _PROFILE, _COORDINATES, *_PARAMETERS],
+        "requestBody": _FORM_BODY,
+    },
 )
-async def osrm_match(
-    request: Request,
-    version: Annotated[str, _VERSION],
-    profile: Annotated[str, _PROFILE],
-    coordinates: Annotated[str, _COORDINATES],
-) -> Response:
+async def osrm_match(request: Request) -> Response:
     """Match the coordinates in the path; options in the query (or a form body)."""
-    return await _answer(request, version, profile, coordinates)
+    path = request.path_params
+    return await _answer(request, path["version"], path["profile"], path["coordinates"])
 
 
 @router.post(
@@ -110,15 +128,12 @@ async def osrm_match(
     "a form body (`application/x-www-form-urlencoded`).",
     response_model=None,
     responses=_RESPONSES,
-    openapi_extra={"parameters": _PARAMETERS, "requestBody": _FORM_BODY},
+    openapi_extra={"parameters": [_VERSION, _PROFILE, *_PARAMETERS], "requestBody": _FORM_BODY},
 )
-async def osrm_match_form(
-    request: Request,
-    version: Annotated[str, _VERSION],
-    profile: Annotated[str, _PROFILE],
-) -> Response:
+async def osrm_match_form(request: Request) -> Response:
     """Match the coordinates of the form body."""
-    return await _answer(request, version, profile, None)
+    path = request.path_params
+    return await _answer(request, path["version"], path["profile"], None)
 
 
 async def _answer(request: Request, version: str, profile: str, path: str | None) -> Response:

@@ -9,9 +9,9 @@ request in the query, as Valhalla does.
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Final
+from typing import Any, Final
 
-from fastapi import APIRouter, Query, Request
+from fastapi import APIRouter, Request
 from fastapi.responses import JSONResponse, Response
 
 from api.compat import compat_responses, count_outcome, error_info, run_compat
@@ -41,6 +41,14 @@ _BODY: Final[dict[str, Any]] = {
 _RESPONSES: Final = compat_responses(
     ValhallaResponse, ValhallaErrorResponse, "The edges and matched points."
 )
+#: Read by the route itself, so that no framework validation answers first.
+_JSON_PARAMETER: Final = {
+    "name": "json",
+    "in": "query",
+    "required": True,
+    "schema": {"type": "string"},
+    "description": "The request as JSON text.",
+}
 _DESCRIPTION: Final = (
     "Valhalla's trace_attributes (valhalla.github.io, Map Matching service) on this "
     "matcher; what maps to what is in the README's HTTP section."
@@ -66,13 +74,11 @@ async def trace_attributes(request: Request) -> Response:
     description=_DESCRIPTION,
     response_model=None,
     responses=_RESPONSES,
+    openapi_extra={"parameters": [_JSON_PARAMETER]},
 )
-async def trace_attributes_get(
-    request: Request,
-    json: Annotated[str, Query(description="The request as JSON text.")] = "",
-) -> Response:
+async def trace_attributes_get(request: Request) -> Response:
     """As ``POST /trace_attributes``, with the request in ``?json=``."""
-    return await _answer(request, json.encode())
+    return await _answer(request, request.query_params.get("json", "").encode())
 
 
 async def _answer(request: Request, query: bytes | None) -> Response:

@@ -245,8 +245,9 @@ def test_no_road_nearby_is_no_segment(client: httpx.Client) -> None:
 
 def test_too_many_coordinates_is_too_big(client: httpx.Client) -> None:
     coords = [(7.41337 + 1e-5 * i, 43.72956) for i in range(1001)]  # the server takes 1000
-    message = _error(client.post("/match/v1/driving", data={"coordinates": _coords(coords)}),
-                     400, "TooBig")  # fmt: skip
+    message = _error(
+        client.post("/match/v1/driving", data={"coordinates": _coords(coords)}), 400, "TooBig"
+    )
     assert "1,000" in message
 
 
@@ -266,8 +267,12 @@ def test_polyline_coordinates_match_like_plain_ones(client: httpx.Client) -> Non
     plain = _ok(client.get(_path(THREE), params={"overview": "full"}))
     text = encode([(lat, lon) for lon, lat in THREE], 5)
     for form in (f"polyline({text})", f"polyline6({encode([(la, lo) for lo, la in THREE], 6)})"):
-        doc = _ok(client.get(f"/match/v1/driving/{requests.utils.quote(form, safe='()')}",
-                             params={"overview": "full"}))  # fmt: skip
+        doc = _ok(
+            client.get(
+                f"/match/v1/driving/{requests.utils.quote(form, safe='()')}",
+                params={"overview": "full"},
+            )
+        )
         assert doc["matchings"][0]["distance"] == pytest.approx(
             plain["matchings"][0]["distance"], abs=1.0
         )
