@@ -428,6 +428,7 @@ def test_issue_12_nmea_log_checksums_fixes_and_midnight() -> None:
     assert tr.time_s.tolist() == expected
     assert tr.has_time
     # the RMC of line 21 was corrupt: its epoch has the GGA's position and HDOP, no speed
+    assert tr.speed_mps is not None
     assert np.isnan(tr.speed_mps[9])
     np.testing.assert_allclose(np.delete(tr.speed_mps, 9), 21.4 * 1852 / 3600)
     np.testing.assert_array_equal(tr.accuracy_m, [1.2 * 5.0] * 29)
