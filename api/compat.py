@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Final, TypeVar
 
 import numpy as np
+from starlette.responses import JSONResponse, Response
 
 import mapmatch
 from api.costs import check_budget, match_cost
@@ -34,7 +35,7 @@ from api.service import MatchOutcome
 from mapmatch import ConfigError, MatchConfig
 
 if TYPE_CHECKING:
-    from collections.abc import Callable, Sequence
+    from collections.abc import Awaitable, Callable, Sequence
 
     from starlette.requests import Request
 
@@ -56,6 +57,7 @@ __all__ = [
     "finite",
     "free_flow_s",
     "haversine_m",
+    "respond",
     "run_compat",
     "segment_rows",
     "shown",
@@ -265,6 +267,27 @@ def compat_responses(
         status: {"model": ok if status == 200 else error, "description": text}
         for status, text in described.items()
     }
+
+
+async def respond(
+    request: Request,
+    work: Callable[[], Awaitable[MatchOutcome]],
+    shape: Callable[[BaseException, ErrorInfo], tuple[int, dict[str, Any]]],
+) -> Response:
+    """
+    The answer of a compatible route: the match's JSON, or any error in the peer's ``shape``.
+
+    Both outcomes are counted in ``mapmatch_matches``, as for ``POST /v1/match``.
+    """
+    try:
+        outcome = await work()
+    except Exception as exc:  # every error answers in the peer's shape, a bug too
+        info = error_info(request, exc)
+        count_outcome(request, info.code)
+        status, body = shape(exc, info)
+        return JSONResponse(body, status_code=status, headers=info.headers)
+    count_outcome(request, "ok")
+    return Response(outcome.content, media_type="application/json")
 
 
 def count_outcome(request: Request, code: str) -> None:

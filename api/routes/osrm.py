@@ -10,12 +10,12 @@ budget and metrics as ``POST /v1/match``. ``POST`` takes the same options as a f
 
 from __future__ import annotations
 
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 from fastapi import APIRouter, Request
-from fastapi.responses import JSONResponse, Response
+from starlette.responses import Response  # noqa: TC002 - FastAPI reads the return type
 
-from api.compat import compat_responses, count_outcome, error_info, run_compat
+from api.compat import compat_responses, respond, run_compat
 from api.deps import get_settings
 from api.errors import UnsupportedMediaTypeError
 from api.intake import BodyLimits, read_limited_body
@@ -30,6 +30,9 @@ from api.osrm_schemas import (
     parse_form,
     parse_request,
 )
+
+if TYPE_CHECKING:
+    from api.service import MatchOutcome
 
 __all__ = ["router"]
 
@@ -137,7 +140,7 @@ async def osrm_match_form(request: Request) -> Response:
 
 
 async def _answer(request: Request, version: str, profile: str, path: str | None) -> Response:
-    try:
+    async def work() -> MatchOutcome:
         settings = get_settings(request)
         params = list(request.query_params.multi_items())
         if request.method == "POST":
@@ -150,20 +153,15 @@ async def _answer(request: Request, version: str, profile: str, path: str | None
                 raise OsrmRequestError(msg, "InvalidUrl", field="coordinates")
             coordinates = given[0]
             params = [(k, v) for k, v in params if k != "coordinates"]
-        outcome = await run_compat(
+        return await run_compat(
             request,
             lambda: build_input(
                 parse_request(version, profile, coordinates, params, max_points=settings.max_points)
             ),
             build_answer,
         )
-    except Exception as exc:  # every error answers in OSRM's shape
-        info = error_info(request, exc)
-        count_outcome(request, info.code)
-        status, body = osrm_error(exc, info)
-        return JSONResponse(body, status_code=status, headers=info.headers)
-    count_outcome(request, "ok")
-    return Response(outcome.content, media_type="application/json")
+
+    return await respond(request, work, osrm_error)
 
 
 async def _form(request: Request, limits: BodyLimits) -> list[tuple[str, str]]:

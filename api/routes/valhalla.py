@@ -9,12 +9,12 @@ request in the query, as Valhalla does.
 
 from __future__ import annotations
 
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 from fastapi import APIRouter, Request
-from fastapi.responses import JSONResponse, Response
+from starlette.responses import Response  # noqa: TC002 - FastAPI reads the return type
 
-from api.compat import compat_responses, count_outcome, error_info, run_compat
+from api.compat import compat_responses, respond, run_compat
 from api.deps import get_settings
 from api.intake import BodyLimits, read_limited_body
 from api.valhalla_schemas import (
@@ -26,6 +26,9 @@ from api.valhalla_schemas import (
     parse_request,
     valhalla_error,
 )
+
+if TYPE_CHECKING:
+    from api.service import MatchOutcome
 
 __all__ = ["router"]
 
@@ -82,7 +85,7 @@ async def trace_attributes_get(request: Request) -> Response:
 
 
 async def _answer(request: Request, query: bytes | None) -> Response:
-    try:
+    async def work() -> MatchOutcome:
         settings = get_settings(request)
         if query is None:
             body = await read_limited_body(request, "json", BodyLimits.of(settings))
@@ -91,15 +94,10 @@ async def _answer(request: Request, query: bytes | None) -> Response:
         else:
             msg = "Failed to parse json request: give the request as ?json={...}"
             raise ValhallaRequestError(100, msg, field="json")
-        outcome = await run_compat(
+        return await run_compat(
             request,
             lambda: build_input(parse_request(body, max_points=settings.max_points)),
             build_answer,
         )
-    except Exception as exc:  # every error answers in Valhalla's shape
-        info = error_info(request, exc)
-        count_outcome(request, info.code)
-        status, error = valhalla_error(exc, info)
-        return JSONResponse(error, status_code=status, headers=info.headers)
-    count_outcome(request, "ok")
-    return Response(outcome.content, media_type="application/json")
+
+    return await respond(request, work, valhalla_error)
