@@ -6,20 +6,22 @@ columns, and renders it as JSON text (:meth:`Table.text`) or as dicts
 (:meth:`Table.objects`); both show the same values, so ``json.loads(table.text())`` equals
 ``table.objects()``.
 
-The text is made column by column (one C-level pass per column: ``repr`` of the floats,
-``str`` of the ints) and row by row with one ``%`` template for the whole object, so no
-dict, no JSON encoder and no numpy scalar is touched per value. Numbers come out as
-``json.dumps`` writes them (``repr``); values that are not finite, and rows outside a
-column's ``valid`` mask, are ``null``.
+The text is made column by column (the floats' digits by a compiled kernel, ``str`` of the
+ints) and row by row with one ``%`` template for the whole object, so no dict, no JSON
+encoder and no numpy scalar is touched per value. Numbers come out as ``json.dumps`` writes
+them (``repr``); values that are not finite, and rows outside a column's ``valid`` mask,
+are ``null``.
 """
 
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
+from numba import njit
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -125,12 +127,81 @@ class Ints:
         return _nulls(values, self._missing(), None)
 
 
+#: ``n`` below this has at most 15 significant digits: its decimal reads back unambiguously.
+_MAX_EXACT = 1e15
+
+
+@njit(cache=True, nogil=True)
+def _decimals_kernel(values, digits):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    Each value's ``repr`` when it has at most ``digits`` decimals, comma-separated ASCII.
+
+    ``n = |v| * 10**digits`` rounded must give ``v`` back (then the decimal ``n / 10**digits``
+    with its trailing zeros dropped is the shortest text reading back as ``v``, which is what
+    ``repr`` writes) and have at most 15 digits; ``repr`` also writes ``1e-05`` below 1e-4.
+    Values that do not qualify are written as nothing and flagged for ``repr`` itself.
+    """
+    scale = 10.0**digits
+    out = np.empty(len(values) * 24, dtype=np.uint8)
+    slow = np.zeros(len(values), dtype=np.bool_)
+    digit = np.empty(20, dtype=np.uint8)
+    at = 0
+    for i in range(len(values)):
+        if i:
+            out[at] = 44  # ,
+            at += 1
+        v = values[i]
+        if not np.isfinite(v):
+            slow[i] = True
+            continue
+        a = abs(v)
+        n = np.rint(a * scale)
+        if n >= _MAX_EXACT or n / scale != a or (a != 0.0 and a < 1e-4):
+            slow[i] = True
+            continue
+        if math.copysign(1.0, v) < 0:
+            out[at] = 45  # -
+            at += 1
+        k = int(n)
+        count = 0
+        while True:  # every digit of n, least significant first
+            digit[count] = 48 + k % 10
+            k //= 10
+            count += 1
+            if k == 0 and count > digits:
+                break
+        for j in range(count - 1, digits - 1, -1):  # the whole part
+            out[at] = digit[j]
+            at += 1
+        out[at] = 46  # .
+        at += 1
+        if digits == 0:
+            out[at] = 48  # 0
+            at += 1
+            continue
+        last = digits - 1  # the fraction, trailing zeros dropped, at least one digit
+        for j in range(digits - 1):
+            if digit[j] != 48:
+                last = j
+                break
+        for j in range(digits - 1, last - 1, -1):
+            out[at] = digit[j]
+            at += 1
+    return out[:at], slow
+
+
 @dataclass(frozen=True, slots=True)
 class Floats:
-    """Real numbers as they are (round them first); ``null`` if not finite or not valid."""
+    """
+    Real numbers as ``repr`` writes them (round them first); ``null`` if not finite or valid.
+
+    ``decimals`` is how many the values carry: those are written by a compiled kernel, any
+    other by ``repr`` itself (the same text, slower).
+    """
 
     values: FloatArray
     valid: BoolArray | None = None
+    decimals: int = 7
 
     def _missing(self) -> BoolArray | None:
         missing = ~np.isfinite(self.values)
@@ -140,8 +211,15 @@ class Floats:
 
     def cells(self, rows: int) -> list[str]:
         """``repr`` of each number."""
-        text = list(map(repr, np.asarray(self.values, dtype=np.float64).tolist()))
-        return _nulls(text, self._missing())
+        values = np.ascontiguousarray(self.values, dtype=np.float64)
+        if len(values) == 0:
+            return []
+        text, slow = _decimals_kernel(values, self.decimals)
+        cells = text.tobytes().decode("ascii").split(",")
+        if slow.any():
+            for i in np.flatnonzero(slow).tolist():
+                cells[i] = repr(float(values[i]))
+        return _nulls(cells, self._missing())
 
     def objects(self, rows: int) -> list[Any]:
         """Python floats, ``None`` where missing."""
@@ -296,16 +374,40 @@ class Table:
     rows
         Number of rows.
     columns
-        ``(name, column)`` in member order (names without ``%``).
+        ``(name, column)`` in member order.
     """
 
     rows: int
     columns: Sequence[tuple[str, Column]]
 
+    def _template(self) -> tuple[str, list[Column]]:
+        """
+        One row's ``%`` template and the columns that fill it, in order.
+
+        Constant members are written into the template and nested objects inlined, so a
+        row is one ``%`` operation however deep it is.
+        """
+        parts: list[str] = []
+        columns: list[Column] = []
+        for name, column in self.columns:
+            key = json.dumps(name).replace("%", "%%")
+            if isinstance(column, Const):
+                parts.append(f"{key}:{column.cells(1)[0].replace('%', '%%')}")
+            elif isinstance(column, Nested) and column.table.rows == self.rows:
+                inner, more = column.table._template()
+                parts.append(f"{key}:{inner}")
+                columns += more
+            else:
+                parts.append(f"{key}:%s")
+                columns.append(column)
+        return "{" + ",".join(parts) + "}", columns
+
     def rows_text(self) -> list[str]:
         """Each row's object as JSON text."""
-        template = "{" + ",".join(f"{json.dumps(name)}:%s" for name, _ in self.columns) + "}"
-        cells = [column.cells(self.rows) for _, column in self.columns]
+        template, columns = self._template()
+        cells = [column.cells(self.rows) for column in columns]
+        if not cells:
+            return [template.replace("%%", "%")] * self.rows
         return list(map(template.__mod__, zip(*cells, strict=True)))
 
     def text(self) -> str:

@@ -212,19 +212,19 @@ def _point_table(result: MatchResult, positions: PathPositions) -> Table:
         [
             ("kind", Const("point")),
             ("index", Ints(np.arange(n))),
-            ("time", Floats(p.time_s)),
+            ("time", Floats(p.time_s, decimals=_SECONDS)),
             ("matched", Bools(matched)),
             ("u", Ints(p.u, matched)),
             ("v", Ints(p.v, matched)),
             ("key", Ints(p.key, matched)),
-            ("offset_m", Floats(py_round(p.offset_m, _METRES))),
-            ("distance_m", Floats(py_round(p.distance_m, _METRES))),
-            ("confidence", Floats(py_round(p.confidence, _CONFIDENCE))),
+            ("offset_m", _rounded(p.offset_m, _METRES)),
+            ("distance_m", _rounded(p.distance_m, _METRES)),
+            ("confidence", _rounded(p.confidence, _CONFIDENCE)),
             ("interpolated", Bools(p.interpolated)),
             ("outlier", Bools(p.outlier)),
             ("segment", Ints(p.segment, matched)),
             ("edge_index", Ints(positions.edge_index, on_path)),
-            ("along_m", Floats(py_round(positions.along_m, _METRES))),
+            ("along_m", _rounded(positions.along_m, _METRES)),
         ],
     )
     position = Tuple((_coordinates(p.lon), _coordinates(p.lat)), matched, "Point")
@@ -232,6 +232,11 @@ def _point_table(result: MatchResult, positions: PathPositions) -> Table:
         n,
         [("type", Const("Feature")), ("geometry", position), ("properties", Nested(properties))],
     )
+
+
+def _rounded(values: FloatArray, digits: int) -> Floats:
+    """Values rounded as Python's ``round(value, digits)`` does, written as ``repr`` does."""
+    return Floats(py_round(values, digits), decimals=digits)
 
 
 def _coordinates(degrees: FloatArray) -> Floats:
@@ -244,7 +249,7 @@ def _edge_json(edges: EdgeTable, part: slice) -> Table:
     names = [name or None for name in edges.name[part]]
 
     def metres(values: FloatArray) -> Floats:
-        return Floats(py_round(values[part], _METRES))
+        return _rounded(values[part], _METRES)
 
     return Table(
         part.stop - part.start,
@@ -258,11 +263,11 @@ def _edge_json(edges: EdgeTable, part: slice) -> Table:
             ("end_offset_m", metres(edges.end_offset_m)),
             ("name", Strings(names)),
             ("road_class", Strings(edges.road_class[part])),
-            ("speed_limit_kph", Floats(py_round(edges.speed_limit_kph[part], 1))),
-            ("entry_time", Floats(py_round(edges.entry_time_s[part], _SECONDS))),
-            ("exit_time", Floats(py_round(edges.exit_time_s[part], _SECONDS))),
-            ("duration_s", Floats(py_round(edges.duration_s[part], _SECONDS))),
-            ("mean_speed_kph", Floats(py_round(edges.mean_speed_kph[part], 2))),
+            ("speed_limit_kph", _rounded(edges.speed_limit_kph[part], 1)),
+            ("entry_time", _rounded(edges.entry_time_s[part], _SECONDS)),
+            ("exit_time", _rounded(edges.exit_time_s[part], _SECONDS)),
+            ("duration_s", _rounded(edges.duration_s[part], _SECONDS)),
+            ("mean_speed_kph", _rounded(edges.mean_speed_kph[part], 2)),
         ],
     )
 
@@ -296,10 +301,10 @@ def _segment_table(result: MatchResult, edges: EdgeTable) -> Table:
                     )
                 ),
             ),
-            ("length_m", Floats(py_round(lengths, _METRES))),
+            ("length_m", _rounded(lengths, _METRES)),
             ("edges", Items([_edge_json(edges, part) for part in parts])),
-            ("start_time", Floats(py_round(start, _SECONDS))),
-            ("end_time", Floats(py_round(end, _SECONDS))),
+            ("start_time", _rounded(start, _SECONDS)),
+            ("end_time", _rounded(end, _SECONDS)),
         ],
     )
     return Table(

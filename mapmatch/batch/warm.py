@@ -4,8 +4,9 @@ Load the compiled kernels once in the local pool's fork server, before any worke
 The first match of a fresh process loads (or compiles) the matcher's and the router's
 kernels: about a second, more when several workers do it at once. The pool's fork server
 imports this module (``set_forkserver_preload``): :func:`warm_up` matches a short trace on a
-block of four streets built in memory, so every worker forked from the server starts with
-the kernels loaded. A failed warm-up changes nothing (the workers load them themselves).
+block of four streets built in memory and writes its GeoJSON, so every worker forked from
+the server starts with the kernels loaded. A failed warm-up changes nothing (the workers
+load them themselves).
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ def warm_up() -> float:
     try:
         with contextlib.suppress(Exception):
             import roadnets
+            from mapmatch.export import geojson_bytes
             from mapmatch.matcher import match
             from mapmatch.trace import Trace
 
@@ -52,7 +54,7 @@ def warm_up() -> float:
             lon = [7.4201, 7.4206, 7.4211, 7.4212, 7.4212]
             lat = [43.73001, 43.73002, 43.73001, 43.7304, 43.7308]
             trace = Trace(time=[0, 5, 10, 15, 20], lon=lon, lat=lat, heading=[90, 90, 90, 0, 0])
-            match(trace, net)
+            geojson_bytes(match(trace, net))  # the writer's number kernel too
             return time.perf_counter() - started
         return 0.0
     finally:

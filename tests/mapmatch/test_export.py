@@ -313,3 +313,23 @@ def test_an_edge_driven_twice_is_told_apart_by_the_order_of_the_fixes(
         [length] * 2 + [other] + [length] * 2 + [other]
     )
     assert _stretch_of(seg, fix_edge, offset).tolist() == [0, 0, 1, 2, 2, 3]
+
+
+@pytest.mark.parametrize("decimals", [0, 1, 3, 4, 7, 9])
+def test_the_number_kernel_writes_what_repr_writes(decimals: int) -> None:
+    from mapmatch._jsontext import Floats
+
+    rng = np.random.default_rng(decimals)
+    values = np.concatenate(
+        (
+            py_round(rng.uniform(-5000, 5000, 5000), decimals),
+            np.round(rng.uniform(-180, 180, 5000), decimals),
+            py_round(rng.uniform(-1, 1, 5000), decimals),
+            1.7e9 + py_round(rng.uniform(0, 1000, 500), 3),  # epoch times
+            rng.uniform(-1e6, 1e6, 500),  # more decimals than the column's: repr's job
+            [0.0, -0.0, 1e-5, 5e-5, 1e-4, 1.2e-4, 1e14, 999999999999999.0, 1e15, 1e16],
+            [2.5, 10.0, 100.0, 0.1, 0.2, 0.3, 7e-4, np.nan, np.inf, -np.inf],
+        )
+    )
+    cells = Floats(values, decimals=decimals).cells(len(values))
+    assert cells == [repr(v) if np.isfinite(v) else "null" for v in values.tolist()]
