@@ -34,12 +34,14 @@ from mapmatch.result import (
 if TYPE_CHECKING:
     from mapmatch.batch.many import match_many
     from mapmatch.matcher import match
+    from mapmatch.online import OnlineMatcher
     from mapmatch.trace import Trace, TraceReport, read_traces
 
 #: Names imported when first used, so ``import mapmatch`` stays light (the matcher's compiled
 #: kernels and the trace readers' pandas load on the first match or trace): name -> module.
 _LAZY = {
     "match": "mapmatch.matcher",
+    "OnlineMatcher": "mapmatch.online",
     "match_many": "mapmatch.batch.many",
     "Trace": "mapmatch.trace",
     "TraceReport": "mapmatch.trace",
@@ -75,6 +77,7 @@ __all__ = [
     "MatchedEdge",
     "MatchedPoints",
     "NoCandidatesError",
+    "OnlineMatcher",
     "Param",
     "RoadNetworkError",
     "Segment",

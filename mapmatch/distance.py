@@ -95,13 +95,15 @@ def check_distance(
     chord_m: float,
     evidence: Evidence = "positions",
     uturns: int = 0,
+    log: bool = True,
 ) -> DistanceCheck:
     """
     Compare the fused trip distance with the matched length and give a verdict.
 
     The fused distance is, in order of preference, the odometer's last minus first known
     value, the caller's ``fused_distance_m``, or the chord sum. A verdict other than
-    ``pass`` is also logged as a warning, so a suspect meter never goes unseen.
+    ``pass`` is also logged as a warning, so a suspect meter never goes unseen; ``log=False``
+    leaves that to the caller (a live trip's running check, recomputed as it settles).
 
     Examples
     --------
@@ -129,7 +131,7 @@ def check_distance(
         verdict = "under"
     else:
         verdict = "pass"
-    if verdict != "pass":
+    if verdict != "pass" and log:
         _log.warning(
             "trace %r: fused distance %.1f m (%s) vs matched %.1f m: relative error %s, %s",
             trace_id,
