@@ -105,18 +105,25 @@ _COORDINATES = _path_parameter(
 )
 
 
-@router.api_route(
-    "/match/{version}/{profile}/{coordinates}",
-    methods=["GET", "POST"],
-    summary="OSRM-compatible match",
-    description="OSRM's match service (project-osrm.org, Match service) on this matcher; "
+_MATCH: Final[dict[str, Any]] = {
+    "summary": "OSRM-compatible match",
+    "description": "OSRM's match service (project-osrm.org, Match service) on this matcher; "
     "what maps to what is in the README's HTTP section.",
-    response_model=None,
-    responses=_RESPONSES,
-    openapi_extra={
-        "parameters": [_VERSION, _PROFILE, _COORDINATES, *_PARAMETERS],
-        "requestBody": _FORM_BODY,
-    },
+    "response_model": None,
+    "responses": _RESPONSES,
+}
+_IN_PATH: Final = [_VERSION, _PROFILE, _COORDINATES, *_PARAMETERS]
+
+
+@router.get(
+    "/match/{version}/{profile}/{coordinates}",
+    **_MATCH,
+    openapi_extra={"parameters": _IN_PATH},
+)
+@router.post(
+    "/match/{version}/{profile}/{coordinates}",
+    **_MATCH,
+    openapi_extra={"parameters": _IN_PATH, "requestBody": _FORM_BODY},
 )
 async def osrm_match(request: Request) -> Response:
     """Match the coordinates in the path; options in the query (or a form body)."""
