@@ -5,8 +5,8 @@ OSRM publishes no HTTP client of its own (its npm ``osrm`` package binds the rou
 parses the answer into its Route / RouteLeg / Waypoint objects. The Valhalla side uses
 ``routingpy``'s request builder and HTTP client (its ``trace_attributes`` answer parser needs a
 ``sidewalk`` on every edge, which Valhalla itself leaves out where there is none, so it is not
-used). Neither is a dependency of the project: the tests skip, saying so, where they are not
-installed (``pip install py-osrm-client routingpy``).
+used). Both are in the ``dev`` extra, so ``make test`` runs these tests; elsewhere they skip,
+saying so, where the libraries are not installed.
 """
 
 from __future__ import annotations
