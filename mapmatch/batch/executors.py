@@ -27,6 +27,7 @@ import sys
 import threading
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
+from functools import partial
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 from mapmatch.errors import MapMatchError
@@ -224,22 +225,19 @@ class ProcessExecutor:
         ``retry(task)`` gives what to run instead (default: the task itself; an empty list
         when nothing of it is left to do).
         """
-        lost: list[T] = []
-        for task, outcome in self._round(fn, tasks):
-            if isinstance(outcome, BrokenProcessPool):
-                lost.append(task)
-            else:
-                yield task, outcome
-        if not lost:
-            return
+        yield from _retried(
+            partial(self._round, fn),
+            tasks,
+            retry,
+            died=BrokenProcessPool,
+            fresh=self._renew,
+            what="the worker process died twice running this task",
+        )
+
+    def _renew(self) -> None:
+        """Replace a broken pool by a fresh one."""
         self._pool.shutdown(wait=True, cancel_futures=True)
         self._pool = self._new_pool()
-        again = [t for task in lost for t in (retry(task) if retry else [task])]
-        for task, outcome in self._round(fn, again):
-            if isinstance(outcome, BrokenProcessPool):
-                msg = f"the worker process died twice running this task ({outcome})"
-                outcome = WorkerLostError(msg)
-            yield task, outcome
 
     def _round(
         self, fn: Callable[..., R], tasks: Sequence[T]
@@ -259,6 +257,38 @@ class ProcessExecutor:
         self._pool.shutdown(wait=True, cancel_futures=True)
         self._parent_end.close()
         self._from_parent.close()
+
+
+def _retried(
+    round_: Callable[[Sequence[T]], Iterator[tuple[T, R | BaseException]]],
+    tasks: Sequence[T],
+    retry: Callable[[T], Sequence[T]] | None,
+    *,
+    died: type[BaseException],
+    fresh: Callable[[], None] | None,
+    what: str,
+) -> Iterator[tuple[T, R | BaseException]]:
+    """
+    Run ``tasks`` in a round; the ones lost with their worker (``died``) once more.
+
+    ``fresh`` makes a new pool first; ``retry(task)`` says what to run instead of a lost
+    task. A task lost again is yielded with a :class:`WorkerLostError` (``what`` says why).
+    """
+    lost: list[T] = []
+    for task, outcome in round_(tasks):
+        if isinstance(outcome, died):
+            lost.append(task)
+        else:
+            yield task, outcome
+    if not lost:
+        return
+    if fresh is not None:
+        fresh()
+    again = [t for task in lost for t in (retry(task) if retry else [task])]
+    for task, outcome in round_(again):
+        if isinstance(outcome, died):
+            outcome = WorkerLostError(f"{what} ({outcome})")
+        yield task, outcome
 
 
 def _outcome(future: Future[R]) -> R | BaseException:
@@ -353,17 +383,14 @@ class DaskExecutor:
         """
         from distributed import KilledWorker
 
-        lost: list[T] = []
-        for task, outcome in self._round(fn, tasks):
-            if isinstance(outcome, KilledWorker):
-                lost.append(task)
-            else:
-                yield task, outcome
-        again = [t for task in lost for t in (retry(task) if retry else [task])]
-        for task, outcome in self._round(fn, again):
-            if isinstance(outcome, KilledWorker):
-                outcome = WorkerLostError(f"the Dask workers running this task died ({outcome})")
-            yield task, outcome
+        yield from _retried(
+            partial(self._round, fn),
+            tasks,
+            retry,
+            died=KilledWorker,
+            fresh=None,  # the scheduler replaces dead workers itself
+            what="the Dask workers running this task died",
+        )
 
     def _round(
         self, fn: Callable[..., R], tasks: Sequence[T]

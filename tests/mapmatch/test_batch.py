@@ -6,7 +6,6 @@ import contextlib
 import csv
 import io
 import json
-import logging
 import os
 import signal
 import subprocess
@@ -23,7 +22,6 @@ from mapmatch.cli import main as cli_main
 from mapmatch.evaluation.simulate import SimulationConfig, simulate_trips
 
 if TYPE_CHECKING:
-    from collections.abc import Iterator
     from pathlib import Path
 
     import roadnets
@@ -443,24 +441,6 @@ def test_sigkill_then_resume_gives_the_uninterrupted_outputs(
     assert not list(out.glob(".tmp-*"))
     assert _outputs(out) == _outputs(reference_run)
     assert _summary_without_seconds(out) == _summary_without_seconds(reference_run)
-
-
-@pytest.fixture(scope="module")
-def dask_cluster() -> Iterator[str]:
-    from distributed import LocalCluster
-
-    cluster = LocalCluster(
-        n_workers=2,
-        threads_per_worker=1,
-        processes=True,
-        host="127.0.0.1",
-        dashboard_address=None,
-        silence_logs=logging.ERROR,
-    )
-    try:
-        yield str(cluster.scheduler_address)
-    finally:
-        cluster.close()
 
 
 def test_dask_cluster_gives_the_local_outputs(

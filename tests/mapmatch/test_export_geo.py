@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import logging
 from typing import TYPE_CHECKING, Any
 
 import geopandas as gpd
@@ -266,23 +265,14 @@ def test_match_many_raises_or_returns_a_trace_error(
 
 
 @pytest.fixture(scope="module")
-def dask_client() -> Iterator[Any]:
-    from distributed import Client, LocalCluster
+def dask_client(dask_cluster: str) -> Iterator[Any]:
+    from distributed import Client
 
-    cluster = LocalCluster(
-        n_workers=2,
-        threads_per_worker=1,
-        processes=True,
-        host="127.0.0.1",
-        dashboard_address=None,
-        silence_logs=logging.ERROR,
-    )
-    client = Client(cluster)
+    client = Client(dask_cluster)
     try:
         yield client
     finally:
         client.close()
-        cluster.close()
 
 
 def test_match_many_on_a_dask_cluster_shares_one_network(
