@@ -518,7 +518,8 @@ class OnlineMatcher:
         stages' calls: a whole round of the input stages over the tail, and settling (the
         window solved and assembled). With ``defer`` (one fix) a push takes at most one of
         them: a round once ``_ROUND_EVERY`` observations have become final (a cheap count
-        tells, :meth:`Tail.newly_final`), else settling when it is due. Without (a batch,
+        tells, :meth:`Tail.newly_final`) or when settling is due and some have, else settling
+        when it is due. Without (a batch,
         closing) it takes both. Until a round runs, the last one still describes every final
         observation.
         """
@@ -526,12 +527,9 @@ class OnlineMatcher:
         assert tail is not None
         rnd = self._round_cache
         out = _Settled.none(self._open_fix)
-        if (
-            closing
-            or rnd is None
-            or (tail.newly_final(self._open_group, self._sigma_est) >= _ROUND_EVERY)
-        ):
-            rnd = self._round(closing=closing)
+        newly = 0 if closing or rnd is None else tail.newly_final(self._open_group, self._sigma_est)
+        if closing or rnd is None or newly >= _ROUND_EVERY or (newly and self._due(rnd)):
+            rnd = self._round(closing=closing)  # settling works from the newest final ones
             self._round_cache = rnd
             if defer:
                 return out
