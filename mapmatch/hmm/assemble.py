@@ -20,9 +20,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from mapmatch.hmm.loops import collapse_loops
+from mapmatch.hmm.geometry import point_on_edge, project_kernel, stretch_vertices
+from mapmatch.hmm.loops import loop_network
 from mapmatch.hmm.observations import travel_arrays
-from mapmatch.hmm.pathwalk import point_on_edge, project_kernel, stretch_vertices, walk_pieces
+from mapmatch.hmm.params import model_params
+from mapmatch.hmm.pathwalk import walk_pieces
 from mapmatch.hmm.transition import route_inputs
 from mapmatch.result import MatchedPoints, Segment
 
@@ -241,13 +243,11 @@ def assemble(
          net.turns.state_edge, geom),
         route_inputs(net),
         float(hold_limit_m),
+        (np.ascontiguousarray(solution.log_emission, f8), np.ascontiguousarray(obs.x, f8),
+         np.ascontiguousarray(obs.y, f8), np.ascontiguousarray(obs.sigma_m, f8),
+         model_params(config), float(config.loop_penalty), loop_network(net)),
     )  # fmt: skip
-    row_ptr, w_edge, w_lo, w_hi, along, jumps, may_loop = walked
-    loops = 0
-    if may_loop.any():  # priced in Python: only a path that passes a place twice gets here
-        row_ptr, w_edge, w_lo, w_hi, along, loops = _collapse(
-            net, obs, solution, config, p_lo, p_hi, (row_ptr, w_edge, w_lo, w_hi, along), may_loop
-        )
+    row_ptr, w_edge, w_lo, w_hi, along, jumps, loops = walked
     chosen = solution.post[np.arange(len(used)), np.maximum(states, 0)]
     placed = _place(
         (row_ptr, w_edge, w_lo, w_hi, along),
@@ -289,48 +289,5 @@ def assemble(
             outlier=np.asarray(outlier, dtype=bool),
         ),
         jumps=int(jumps.sum()),
-        loops=loops,
-    )
-
-
-def _collapse(
-    net: RoadNetwork,
-    obs: Observations,
-    solution: Solution,
-    config: MatchConfig,
-    p_lo: Any,
-    p_hi: Any,
-    walked: tuple[Any, ...],
-    may_loop: Any,
-) -> tuple[Any, ...]:
-    """The walked paths with the loops :func:`collapse_loops` takes out of the flagged pieces."""
-    row_ptr, w_edge, w_lo, w_hi, along = walked
-    along = along.copy()
-    edges, los, his = [], [], []
-    loops = 0
-    for p in range(len(p_lo)):
-        lo, hi = int(row_ptr[p]), int(row_ptr[p + 1])
-        e, l0, h0 = w_edge[lo:hi], w_lo[lo:hi], w_hi[lo:hi]
-        if may_loop[p]:
-            start, stop = int(p_lo[p]), int(p_hi[p])
-            entries = [[int(k), float(s), float(t)] for k, s, t in zip(e, l0, h0, strict=True)]
-            entries, along_p, removed = collapse_loops(
-                net, obs, solution, start, entries, along[start:stop], config
-            )
-            loops += removed
-            along[start:stop] = along_p
-            table = np.array(entries, dtype=np.float64).reshape(-1, 3)
-            e, l0, h0 = table[:, 0].astype(np.int64), table[:, 1], table[:, 2]
-        edges.append(e)
-        los.append(l0)
-        his.append(h0)
-    sizes = np.array([len(e) for e in edges], dtype=np.int64)
-    ptr = np.concatenate(([0], np.cumsum(sizes))).astype(np.int64)
-    return (
-        ptr,
-        np.concatenate(edges).astype(np.int64),
-        np.concatenate(los).astype(np.float64),
-        np.concatenate(his).astype(np.float64),
-        along,
-        loops,
+        loops=int(loops.sum()),
     )

@@ -12,176 +12,394 @@ and out of the loop. A loop stays only when it explains the fixes better by at l
 ``loop_penalty`` nats; a car going round a block or into a dead end has fixes all along the
 loop, far from its start, and keeps it easily. A loop that a turn restriction forces (the
 only legal way round a banned turn) is never taken out.
+
+Compiled (:func:`collapse_kernel`): the path walk of :mod:`mapmatch.hmm.pathwalk` runs it on
+every piece that passes a place twice; :func:`collapse_loops` is the same on a list of
+stretches.
 """
 
 from __future__ import annotations
 
-import itertools
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numba import njit
 
-from mapmatch.hmm.emission import distance_emission
-from mapmatch.hmm.routes import ROUTE_STANDSTILL, ROUTE_VIA_GRAPH
-from mapmatch.hmm.transition import log_transition
+from mapmatch.hmm.emission import distance_score
+from mapmatch.hmm.geometry import point_on_edge
+from mapmatch.hmm.observations import between_kernel, travel_arrays
+from mapmatch.hmm.params import P_UTURN_PENALTY, model_params
+from mapmatch.hmm.transition import transition_score
 
 if TYPE_CHECKING:
+    from typing import Any
+
     from mapmatch.config import MatchConfig
     from mapmatch.hmm.observations import Observations
     from mapmatch.hmm.solution import Solution
     from mapmatch.types import FloatArray
     from roadnets import RoadNetwork
 
-__all__ = ["collapse_loops"]
+__all__ = ["collapse_kernel", "collapse_loops", "loop_network", "pairwise_sum"]
 
 
 _EPS_M = 1e-6
 
 
-def _node_visits(net: RoadNetwork, entries: list[list[float]]) -> list[tuple[int, float]]:
-    """The nodes the path passes, with the distance along the path where it passes them."""
-    arrays = net.arrays
-    visits: list[tuple[int, float]] = []
+@njit(cache=True, nogil=True)
+def _block_sum(a, lo, n):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """The sum of at most 128 values as numpy adds them: in order below 8, else in eight runs."""
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[lo + i]
+        return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    while i < n - (n % 8):
+        r0 += a[lo + i]
+        r1 += a[lo + i + 1]
+        r2 += a[lo + i + 2]
+        r3 += a[lo + i + 3]
+        r4 += a[lo + i + 4]
+        r5 += a[lo + i + 5]
+        r6 += a[lo + i + 6]
+        r7 += a[lo + i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@njit(cache=True, nogil=True)
+def pairwise_sum(a, lo, n):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """
+    ``np.sum(a[lo:lo + n])`` as numpy adds it, to the bit.
+
+    Blocks of up to 128 values summed by :func:`_block_sum`, longer runs halved (at a
+    multiple of 8) and the halves added. The halving runs on an explicit stack: numba cannot
+    cache a function that calls itself.
+    """
+    if n <= 128:
+        return _block_sum(a, lo, n)
+    s_lo = np.empty(64, dtype=np.int64)
+    s_n = np.empty(64, dtype=np.int64)
+    stage = np.zeros(64, dtype=np.int64)  # 0: new, 1: left half pending, 2: right pending
+    left = np.empty(64)
+    s_lo[0], s_n[0], stage[0] = lo, n, 0
+    top = 1
+    result = 0.0
+    while top > 0:
+        i = top - 1
+        half = s_n[i] // 2
+        half -= half % 8
+        if s_n[i] <= 128 or stage[i] == 3:
+            value = _block_sum(a, s_lo[i], s_n[i]) if s_n[i] <= 128 else left[i]
+            top -= 1
+            if top == 0:
+                result = value
+            elif stage[top - 1] == 1:
+                left[top - 1] = value
+            else:
+                left[top - 1] = left[top - 1] + value
+                stage[top - 1] = 3
+        elif stage[i] == 0:
+            stage[i] = 1
+            s_lo[top], s_n[top], stage[top] = s_lo[i], half, 0
+            top += 1
+        elif stage[i] == 1:
+            stage[i] = 2
+            s_lo[top], s_n[top], stage[top] = s_lo[i] + half, s_n[i] - half, 0
+            top += 1
+    return result
+
+
+@njit(cache=True, nogil=True)
+def _loops(e, lo, hi, net):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """
+    The loops of a path, innermost first: ``(x, y, s0, s1)`` arrays.
+
+    Each node passed twice (the stretch between the passes), then each drive back from a
+    mid-road U-turn to the place where it turned; sorted by length, stably.
+    """
+    edge_len, edge_u, edge_v, edge_twin, node_x, node_y = net[:6]
+    geom = net[9]
+    n = len(e)
+    nodes = np.empty(2 * n, dtype=np.int64)
+    at = np.empty(2 * n)
+    m = 0
     base = 0.0
-    for edge, lo, hi in entries:
-        e = int(edge)
-        if lo <= _EPS_M:
-            visits.append((int(arrays.edge_u[e]), base))
-        base += hi - lo
-        if hi >= arrays.edge_length_m[e] - _EPS_M:
-            visits.append((int(arrays.edge_v[e]), base))
-    unique: list[tuple[int, float]] = []
-    for node, at in visits:
-        if not unique or unique[-1][0] != node or abs(unique[-1][1] - at) > _EPS_M:
-            unique.append((node, at))
-    return unique
-
-
-def _turnback_returns(
-    net: RoadNetwork, entries: list[list[float]]
-) -> list[tuple[tuple[float, float], float, float]]:
-    """
-    Drives back from a U-turn in the middle of a road that return to where it turned.
-
-    For each mid-road U-turn (a stretch of edge ``e`` ending at ``X``, then its reverse twin)
-    the first later stretch of ``e`` that passes ``X`` again closes the excursion: its place
-    ``(x, y)``, the distance along the path of the turn and of the return to ``X``.
-    """
-    arrays = net.arrays
-    out: list[tuple[tuple[float, float], float, float]] = []
-    starts = np.concatenate(([0.0], np.cumsum([hi - lo for _, lo, hi in entries])))
-    for k in range(len(entries) - 1):
-        e, _, turn = entries[k]
-        nxt = int(entries[k + 1][0])
-        ek = int(e)
-        if arrays.edge_twin[ek] != nxt or turn >= arrays.edge_length_m[ek] - _EPS_M:
+    for k in range(n):
+        if lo[k] <= _EPS_M:
+            m = _visit(nodes, at, m, edge_u[e[k]], base)
+        base += hi[k] - lo[k]
+        if hi[k] >= edge_len[e[k]] - _EPS_M:
+            m = _visit(nodes, at, m, edge_v[e[k]], base)
+    by_node = np.argsort(nodes[:m], kind="mergesort")
+    where = np.empty(m + n, dtype=np.int64)  # the visit that closes each loop (order found)
+    lx, ly, s0, s1 = np.empty(m + n), np.empty(m + n), np.empty(m + n), np.empty(m + n)
+    count = 0
+    for i in range(1, m):
+        j, k = by_node[i - 1], by_node[i]
+        if nodes[j] == nodes[k] and at[k] > at[j] + _EPS_M:
+            where[count] = k
+            lx[count], ly[count] = node_x[nodes[k]], node_y[nodes[k]]
+            s0[count], s1[count] = at[j], at[k]
+            count += 1
+    found = np.argsort(where[:count], kind="mergesort")
+    lx[:count], ly[:count] = lx[:count][found], ly[:count][found]
+    s0[:count], s1[:count] = s0[:count][found], s1[:count][found]
+    starts = np.empty(n + 1)
+    starts[0] = 0.0
+    for k in range(n):
+        starts[k + 1] = starts[k] + (hi[k] - lo[k])
+    for k in range(n - 1):
+        turn = hi[k]
+        if edge_twin[e[k]] != e[k + 1] or turn >= edge_len[e[k]] - _EPS_M:
             continue  # not a U-turn in the middle of the road
-        for m in range(k + 2, len(entries)):
-            em, lo, hi = entries[m]
-            if int(em) == ek and lo - _EPS_M <= turn <= hi + _EPS_M:
-                px, py = net.point_on_edge(np.array([ek]), np.array([turn]))
-                out.append(
-                    (
-                        (float(px[0]), float(py[0])),
-                        float(starts[k + 1]),
-                        float(starts[m] + turn - lo),
-                    )
-                )
+        for j in range(k + 2, n):
+            if e[j] == e[k] and lo[j] - _EPS_M <= turn <= hi[j] + _EPS_M:
+                lx[count], ly[count] = point_on_edge(e[k], turn, *geom)
+                s0[count], s1[count] = starts[k + 1], starts[j] + turn - lo[j]
+                count += 1
                 break
-    return out
+    order = np.argsort(s1[:count] - s0[:count], kind="mergesort")
+    return lx[:count][order], ly[:count][order], s0[:count][order], s1[:count][order]
 
 
-def _free_uturns(net: RoadNetwork, entries: list[list[float]], s0: float, s1: float) -> int:
+@njit(cache=True, nogil=True, inline="always")
+def _visit(nodes, at, m, node, here):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Add a node passed, unless it repeats the last one passed (the path's node visits)."""
+    if m == 0 or nodes[m - 1] != node or abs(at[m - 1] - here) > _EPS_M:
+        nodes[m], at[m] = node, here
+        m += 1
+    return m
+
+
+@njit(cache=True, nogil=True)
+def _free_uturns(e, lo, hi, s0, s1, edge_len, edge_v, edge_twin, out_ptr):  # type: ignore[no-untyped-def]  # pragma: no cover
     """U-turns the path makes between ``s0`` and ``s1`` along it, but at dead ends."""
-    arrays = net.arrays
     count = 0
     base = 0.0
-    for k in range(len(entries) - 1):
-        e, lo, hi = entries[k]
-        base += hi - lo
-        nxt = int(entries[k + 1][0])
-        if not (s0 - _EPS_M <= base <= s1 + _EPS_M) or arrays.edge_twin[int(e)] != nxt:
+    for k in range(len(e) - 1):
+        base += hi[k] - lo[k]
+        if not (s0 - _EPS_M <= base <= s1 + _EPS_M) or edge_twin[e[k]] != e[k + 1]:
             continue
-        node = int(arrays.edge_v[int(e)])
-        at_node = hi >= arrays.edge_length_m[int(e)] - _EPS_M
-        if not (at_node and arrays.out_ptr[node + 1] - arrays.out_ptr[node] <= 1):
+        node = edge_v[e[k]]
+        at_node = hi[k] >= edge_len[e[k]] - _EPS_M
+        if not (at_node and out_ptr[node + 1] - out_ptr[node] <= 1):
             count += 1
     return count
 
 
-def _cut(entries: list[list[float]], s0: float, s1: float) -> list[list[float]]:
+@njit(cache=True, nogil=True)
+def _cut(e, lo, hi, s0, s1):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     """The path without its stretch between ``s0`` and ``s1`` along it (cut mid-stretch too)."""
-    kept: list[list[float]] = []
+    n = len(e)
+    ke, klo, khi = np.empty(2 * n, dtype=np.int64), np.empty(2 * n), np.empty(2 * n)
+    m = 0
     base = 0.0
-    for edge, lo, hi in entries:
-        length = hi - lo
-        a, b = base, base + length  # this stretch's extent along the path
+    for k in range(n):
+        a, b = base, base + (hi[k] - lo[k])  # this stretch's extent along the path
         if b <= s0 + _EPS_M or a >= s1 - _EPS_M:
-            kept.append([edge, lo, hi])
+            ke[m], klo[m], khi[m] = e[k], lo[k], hi[k]
+            m += 1
         else:
             if a < s0 - _EPS_M:
-                kept.append([edge, lo, lo + (s0 - a)])
+                ke[m], klo[m], khi[m] = e[k], lo[k], lo[k] + (s0 - a)
+                m += 1
             if b > s1 + _EPS_M:
-                kept.append([edge, lo + (s1 - a), hi])
+                ke[m], klo[m], khi[m] = e[k], lo[k] + (s1 - a), hi[k]
+                m += 1
         base = b
-    merged: list[list[float]] = []
-    for entry in kept:  # the two ends of a cut on one edge join up again
-        if merged and int(merged[-1][0]) == int(entry[0]) and abs(merged[-1][2] - entry[1]) < 1e-3:
-            merged[-1][2] = entry[2]
+    j = 0  # the two ends of a cut on one edge join up again
+    for k in range(m):
+        if j and ke[j - 1] == ke[k] and abs(khi[j - 1] - klo[k]) < 1e-3:
+            khi[j - 1] = khi[k]
         else:
-            merged.append(entry)
-    return merged or entries[:1]
+            ke[j], klo[j], khi[j] = ke[k], klo[k], khi[k]
+            j += 1
+    if j == 0:
+        return e[:1].copy(), lo[:1].copy(), hi[:1].copy()
+    return ke[:j].copy(), klo[:j].copy(), khi[:j].copy()
 
 
-def _loop_gain(
-    net: RoadNetwork,
-    obs: Observations,
-    solution: Solution,
-    start: int,
-    along: FloatArray,
-    entries: list[list[float]],
-    place: tuple[float, float],
-    s0: float,
-    s1: float,
-    config: MatchConfig,
-) -> float:
-    """Log-likelihood of the loop as driven minus that of holding at its node."""
-    used, states = solution.used, solution.states
-    inside = np.flatnonzero((along > s0 + _EPS_M) & (along < s1 - _EPS_M))
-    ahead, behind = np.flatnonzero(along <= s0 + _EPS_M), np.flatnonzero(along >= s1 - _EPS_M)
-    if not len(ahead) or not len(behind) or behind[0] <= ahead[-1]:
+@njit(cache=True, nogil=True)
+def _legal(e, edge_u, edge_v, trans_ptr, trans_to, state_edge):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Whether the path's moves from edge to edge are all allowed (restrictions obeyed)."""
+    drive = np.empty(len(e), dtype=np.int64)
+    m = 0
+    for k in range(len(e)):
+        if k == 0 or e[k] != e[k - 1]:
+            drive[m] = e[k]
+            m += 1
+    for k in range(m - 1):
+        if edge_v[drive[k]] != edge_u[drive[k + 1]]:
+            return True  # a jump in the path (drawn as such): nothing to check across it
+    if m == 0:
+        return True
+    state = drive[0]
+    for k in range(1, m):  # TurnGraph.first_banned: follow the restricted copies
+        nxt = -1
+        for i in range(trans_ptr[state], trans_ptr[state + 1]):
+            if state_edge[trans_to[i]] == drive[k]:
+                nxt = trans_to[i]
+                break
+        if nxt < 0:
+            return False
+        state = nxt
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _gain(along, e, lo, hi, place_x, place_y, s0, s1, model, travel, net):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Log-likelihood of the loop as driven minus that of holding where it begins."""
+    start, used, states, em_pad, ox, oy, otime, osigma, params = model[:9]
+    edge_len, edge_v, edge_twin, out_ptr = net[0], net[2], net[3], net[6]
+    n = len(along)
+    before, after, inside = -1, -1, 0
+    for i in range(n):
+        if along[i] <= s0 + _EPS_M:
+            before = i
+    for i in range(n - 1, -1, -1):
+        if along[i] >= s1 - _EPS_M:
+            after = i
+    for i in range(n):
+        if s0 + _EPS_M < along[i] < s1 - _EPS_M:
+            inside += 1
+    if before < 0 or after < 0 or after <= before:
         return np.inf  # the loop is not between observations of the piece: keep it
-    before, after = int(ahead[-1]), int(behind[0])
-    chain = np.arange(before, after + 1)  # positions in the piece, the loop's and its ends
-    k = used[start + chain]
-    step_m = np.hypot(np.diff(obs.x[k]), np.diff(obs.y[k]))
-    dt = np.diff(obs.time_s[k])
-    sigma = np.maximum(obs.sigma_m[k[:-1]], obs.sigma_m[k[1:]])
-    travel = None
-    if obs.travel is not None:
-        travel = obs.travel.between(k)
-    kinds = np.full(len(chain) - 1, ROUTE_VIA_GRAPH)
-    driven = np.diff(along[chain])
-    no_time = np.full(len(driven), np.inf)  # no speed term: both alternatives alike
-    as_driven = log_transition(step_m, driven, no_time, kinds, dt, sigma, config, travel)
-    em_driven = solution.log_emission[start + inside, states[start + inside]]
-
-    held = np.zeros(len(driven))
+    k = used[start + before : start + after + 1]
+    steps = len(k) - 1
+    odometer, speed_m, slack_m, unknown_lo, unknown_hi = travel
+    if len(odometer) or len(speed_m):
+        travel_m, slack = between_kernel(k, odometer, speed_m, slack_m, unknown_lo, unknown_hi)
+    else:
+        travel_m, slack = np.full(steps, np.nan), np.zeros(steps)
+    penalty = params[P_UTURN_PENALTY]
+    as_driven = np.empty(steps)
+    as_held = np.empty(steps)
+    held = np.zeros(steps)
     held[0] = s0 - along[before]
-    held[-1] = along[after] - s1 if len(inside) else along[after] - along[before] - (s1 - s0)
-    held_kinds = np.full(len(driven), ROUTE_STANDSTILL)
-    held_kinds[0] = held_kinds[-1] = ROUTE_VIA_GRAPH
-    as_held = log_transition(step_m, held, no_time, held_kinds, dt, sigma, config, travel)
-    px, py = place
-    kk = used[start + inside]
-    distance = np.hypot(obs.x[kk] - px, obs.y[kk] - py)
-    em_held = distance_emission(distance, obs.sigma_m[kk], config)
+    if inside:
+        held[steps - 1] = along[after] - s1
+    else:
+        held[steps - 1] = along[after] - along[before] - (s1 - s0)
+    for i in range(steps):
+        a, b = k[i], k[i + 1]
+        gc = np.hypot(ox[b] - ox[a], oy[b] - oy[a])
+        dt = otime[b] - otime[a]
+        sigma = max(osigma[a], osigma[b])
+        driven = along[before + i + 1] - along[before + i]
+        # no speed term (no free-flow time): both alternatives alike
+        as_driven[i] = transition_score(
+            gc, driven, np.inf, False, dt, sigma, travel_m[i], slack[i], penalty, params
+        )
+        as_held[i] = transition_score(
+            gc, held[i], np.inf, False, dt, sigma, travel_m[i], slack[i], penalty, params
+        )
+    em_driven = np.empty(inside)
+    em_held = np.empty(inside)
+    j = 0
+    for i in range(n):
+        if s0 + _EPS_M < along[i] < s1 - _EPS_M:
+            t = start + i
+            em_driven[j] = em_pad[t, states[t]]
+            o = used[t]
+            em_held[j] = distance_score(
+                np.hypot(ox[o] - place_x, oy[o] - place_y), osigma[o], params
+            )
+            j += 1
     # the loop's U-turns cost what they cost in Viterbi, but one at a dead end's end is no
     # choice: the loop into a dead end is priced by loop_penalty alone
-    uturns = _free_uturns(net, entries, s0, s1)
-    driven_ll = float(np.sum(as_driven) + np.sum(em_driven)) - config.uturn_penalty * uturns
-    held_ll = float(np.sum(as_held) + np.sum(em_held))
+    uturns = _free_uturns(e, lo, hi, s0, s1, edge_len, edge_v, edge_twin, out_ptr)
+    driven_ll = (
+        pairwise_sum(as_driven, 0, steps) + pairwise_sum(em_driven, 0, inside)
+    ) - penalty * uturns
+    held_ll = pairwise_sum(as_held, 0, steps) + pairwise_sum(em_held, 0, inside)
     return driven_ll - held_ll
+
+
+@njit(cache=True, nogil=True)
+def collapse_kernel(e, lo, hi, along, model, travel, net):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    Take out the loops of one piece's path that do not pay for themselves.
+
+    ``(e, lo, hi)`` are the path's stretches and ``along`` the distance along it of each of
+    the piece's observations; ``model`` is ``(start, used, states, log_emission, x, y, time,
+    sigma, params, loop_penalty)`` of the solution and its observations, ``travel`` their
+    travel arrays, ``net`` :func:`loop_network`. Returns the new stretches and distances and
+    how many loops were taken out. The innermost loops go first; each one taken out leaves
+    its observations at its node.
+    """
+    edge_u, edge_v = net[1], net[2]
+    trans_ptr, trans_to, state_edge = net[7][0], net[7][1], net[7][2]
+    loop_penalty = model[9]
+    removed = 0
+    along = along.copy()
+    for _ in range(64):  # each pass takes out at most one loop
+        lx, ly, ls0, ls1 = _loops(e, lo, hi, net)
+        cut = False
+        for i in range(len(ls0)):
+            s0, s1 = ls0[i], ls1[i]
+            gain = _gain(along, e, lo, hi, lx[i], ly[i], s0, s1, model, travel, net)
+            if gain >= loop_penalty:
+                continue
+            ce, clo, chi = _cut(e, lo, hi, s0, s1)
+            if _legal(ce, edge_u, edge_v, trans_ptr, trans_to, state_edge):
+                # a loop that a turn restriction forces stays
+                e, lo, hi = ce, clo, chi
+                for j in range(len(along)):
+                    along[j] = (
+                        along[j] - (s1 - s0) if along[j] >= s1 - _EPS_M else min(along[j], s0)
+                    )
+                cut = True
+                break
+        if not cut:
+            break
+        removed += 1
+    return e, lo, hi, along, removed
+
+
+def loop_network(net: RoadNetwork) -> tuple[Any, ...]:
+    """The network arrays :func:`collapse_kernel` reads."""
+    a, turns = net.arrays, net.turns
+    vertex_pos = net._vertex_position
+    geom = (a.edge_length_m, a.edge_geom_ptr, a.geom_x, a.geom_y, a.geom_cum_m, vertex_pos)
+    return (
+        a.edge_length_m,
+        a.edge_u,
+        a.edge_v,
+        a.edge_twin,
+        a.node_x,
+        a.node_y,
+        a.out_ptr,
+        (turns.trans_ptr, turns.trans_to, turns.state_edge),
+        0,
+        geom,
+    )
+
+
+def loop_model(
+    obs: Observations, solution: Solution, start: int, config: MatchConfig
+) -> tuple[Any, ...]:
+    """The ``model`` argument of :func:`collapse_kernel` for the piece starting at ``start``."""
+    f8 = np.float64
+    return (
+        start,
+        solution.used,
+        solution.states,
+        np.ascontiguousarray(solution.log_emission, f8),
+        np.ascontiguousarray(obs.x, f8),
+        np.ascontiguousarray(obs.y, f8),
+        np.ascontiguousarray(obs.time_s, f8),
+        np.ascontiguousarray(obs.sigma_m, f8),
+        model_params(config),
+        float(config.loop_penalty),
+    )
 
 
 def collapse_loops(
@@ -201,42 +419,15 @@ def collapse_loops(
     ``start``). Returns the new stretches and distances, and how many loops were taken out.
     The innermost loops go first; each one taken out leaves its observations at its node.
     """
-    removed = 0
-    along = along.copy()
-    arrays = net.arrays
-    for _ in range(64):  # each pass takes out at most one loop
-        loops: list[tuple[tuple[float, float], float, float]] = []
-        seen: dict[int, float] = {}
-        for node, at in _node_visits(net, entries):
-            if node in seen and at > seen[node] + _EPS_M:
-                place = (float(arrays.node_x[node]), float(arrays.node_y[node]))
-                loops.append((place, seen[node], at))
-            seen[node] = at
-        loops.extend(_turnback_returns(net, entries))
-        loops.sort(key=lambda loop: loop[2] - loop[1])  # innermost first
-        cut = None
-        for place, s0, s1 in loops:
-            gain = _loop_gain(net, obs, solution, start, along, entries, place, s0, s1, config)
-            if gain >= config.loop_penalty:
-                continue
-            shorter = _cut(entries, s0, s1)
-            if _legal(net, shorter):  # a loop that a turn restriction forces stays
-                cut = (s0, s1, shorter)
-                break
-        if cut is None:
-            break
-        s0, s1, entries = cut
-        along = np.where(along >= s1 - _EPS_M, along - (s1 - s0), np.minimum(along, s0))
-        removed += 1
-    return entries, along, removed
-
-
-def _legal(net: RoadNetwork, entries: list[list[float]]) -> bool:
-    """Whether the path's moves from edge to edge are all allowed (restrictions obeyed)."""
-    edges = [int(e) for e, _, _ in entries]
-    drive = [e for i, e in enumerate(edges) if i == 0 or e != edges[i - 1]]
-    arrays = net.arrays
-    for a, b in itertools.pairwise(drive):
-        if arrays.edge_v[a] != arrays.edge_u[b]:
-            return True  # a jump in the path (drawn as such): nothing to check across it
-    return net.turns.first_banned(drive) == -1
+    table = np.array(entries, dtype=np.float64).reshape(-1, 3)
+    e, lo, hi, along_m, removed = collapse_kernel(
+        table[:, 0].astype(np.int64),
+        np.ascontiguousarray(table[:, 1]),
+        np.ascontiguousarray(table[:, 2]),
+        np.ascontiguousarray(along, np.float64),
+        loop_model(obs, solution, start, config),
+        travel_arrays(obs.travel),
+        loop_network(net),
+    )
+    out = [[int(k), float(s), float(t)] for k, s, t in zip(e, lo, hi, strict=True)]
+    return out, np.asarray(along_m, dtype=np.float64), int(removed)

@@ -13,109 +13,16 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from mapmatch.hmm.geometry import project_kernel, stretch_vertices
+from mapmatch.hmm.loops import collapse_kernel
 from mapmatch.hmm.observations import between_kernel
 from mapmatch.hmm.routes import ROUTE_SAME_EDGE, ROUTE_STANDSTILL, ROUTE_UTURN
 from mapmatch.hmm.transition import _pair_routes
 
-__all__ = [
-    "EPS_M",
-    "point_on_edge",
-    "project_kernel",
-    "stretch_vertices",
-    "walk_pieces",
-]
+__all__ = ["EPS_M", "walk_pieces"]
 
 #: Two places this close (metres) along a road are one.
 EPS_M = 1e-6
-
-
-@njit(cache=True, nogil=True)
-def point_on_edge(edge, offset, edge_len, geom_ptr, geom_x, geom_y, geom_cum, vertex_pos):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """:meth:`RoadNetwork.point_on_edge <roadnets.RoadNetwork.point_on_edge>` of one place."""
-    offset = min(max(offset, 0.0), edge_len[edge])
-    base = vertex_pos[geom_ptr[edge]]
-    i = np.searchsorted(vertex_pos, base + offset, side="right") - 1
-    i = min(max(i, geom_ptr[edge]), geom_ptr[edge + 1] - 2)
-    seg = geom_cum[i + 1] - geom_cum[i]
-    t = (offset - geom_cum[i]) / seg if seg > 0 else 0.0
-    t = min(max(t, 0.0), 1.0)
-    return geom_x[i] + t * (geom_x[i + 1] - geom_x[i]), geom_y[i] + t * (geom_y[i + 1] - geom_y[i])
-
-
-@njit(cache=True, nogil=True)
-def stretch_vertices(edge, start_m, end_m, geom):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """
-    Vertices of a path of edge stretches with their distance along it, in order.
-
-    The stretches' ends (interpolated) and the edges' vertices between them; ``geom`` is
-    ``(edge_len, geom_ptr, geom_x, geom_y, geom_cum, vertex_pos)``. Where two have the same
-    distance, a stretch's start comes before the vertices, and they before its end.
-    """
-    geom_ptr, geom_x, geom_y, geom_cum = geom[1], geom[2], geom[3], geom[4]
-    n = len(edge)
-    base = np.empty(n)
-    acc = 0.0
-    inner = 0
-    for i in range(n):
-        base[i] = acc
-        acc += end_m[i] - start_m[i]
-        for v in range(geom_ptr[edge[i]], geom_ptr[edge[i] + 1]):
-            if start_m[i] < geom_cum[v] < end_m[i]:
-                inner += 1
-    total = 2 * n + inner
-    x = np.empty(total)
-    y = np.empty(total)
-    along = np.empty(total)
-    for i in range(n):
-        x[i], y[i] = point_on_edge(edge[i], start_m[i], *geom)
-        along[i] = base[i]
-        k = n + inner + i
-        x[k], y[k] = point_on_edge(edge[i], end_m[i], *geom)
-        along[k] = base[i] + end_m[i] - start_m[i]
-    k = n
-    for i in range(n):
-        for v in range(geom_ptr[edge[i]], geom_ptr[edge[i] + 1]):
-            if start_m[i] < geom_cum[v] < end_m[i]:
-                x[k], y[k] = geom_x[v], geom_y[v]
-                along[k] = base[i] + geom_cum[v] - start_m[i]
-                k += 1
-    order = np.argsort(along, kind="mergesort")
-    return x[order], y[order], along[order]
-
-
-@njit(cache=True, nogil=True)
-def project_kernel(px, py, lo, hi, vx, vy, va):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """Nearest point of a polyline (vertices ``vx, vy`` at distances ``va``) within [lo, hi]."""
-    n = len(px)
-    along = np.empty(n)
-    dist = np.empty(n)
-    nv = len(va)
-    for i in range(n):
-        best_d = np.inf
-        best_a = lo[i]
-        k0 = max(np.searchsorted(va, lo[i], side="right") - 1, 0)
-        k1 = min(np.searchsorted(va, hi[i], side="left"), nv - 1)
-        if nv == 1 or k0 >= k1:
-            k = min(k0, nv - 1)
-            best_a = min(max(va[k], lo[i]), hi[i])
-            best_d = np.hypot(px[i] - vx[k], py[i] - vy[k])
-        for k in range(k0, k1):
-            seg = va[k + 1] - va[k]
-            ax, ay = vx[k], vy[k]
-            dx, dy = vx[k + 1] - ax, vy[k + 1] - ay
-            d2 = dx * dx + dy * dy
-            t = ((px[i] - ax) * dx + (py[i] - ay) * dy) / d2 if d2 > 0 and seg > 0 else 0.0
-            a = va[k] + min(max(t, 0.0), 1.0) * seg
-            a = min(max(a, lo[i]), hi[i])
-            f = (a - va[k]) / seg if seg > 0 else 0.0
-            qx, qy = ax + f * dx, ay + f * dy
-            d = np.hypot(px[i] - qx, py[i] - qy)
-            if d < best_d:
-                best_d = d
-                best_a = a
-        along[i] = best_a
-        dist[i] = best_d
-    return along, dist
 
 
 @njit(cache=True, nogil=True)
@@ -189,7 +96,7 @@ def _behind(edge, offset, front_edge, front, limit, edge_len, routing):  # type:
 
 @njit(cache=True, nogil=True)
 def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    solution, obs, fixes, travel, net, routing, hold_limit
+    solution, obs, fixes, travel, net, routing, hold_limit, loops
 ):
     """
     The stretches driven through every piece of a solution, and where each fix of it is.
@@ -200,16 +107,18 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     observations' travel arrays, ``net`` ``(edge_len, edge_speed, edge_u, edge_v, edge_twin,
     out_ptr, state_edge, geom)`` (``geom`` as :func:`stretch_vertices` reads it).
 
-    Returns ``(row_ptr, edge, lo, hi, along, jumps, loop)``: the stretches of piece ``p``
+    ``loops`` is ``(log_emission, x, y, sigma, params, loop_penalty, network)`` for
+    :func:`~mapmatch.hmm.loops.collapse_kernel`, run on each piece's path.
+
+    Returns ``(row_ptr, edge, lo, hi, along, jumps, loops)``: the stretches of piece ``p``
     are rows ``row_ptr[p]:row_ptr[p + 1]``, ``along`` holds the distance along its path of
     each of its used observations (in solution order), ``jumps`` the moves drawn as jumps,
-    ``loop`` whether the path may hold a loop for :func:`~mapmatch.hmm.loops.collapse_loops`
-    to price.
+    ``loops`` the loops taken out, per piece.
     """
     c_ptr, c_edge, c_off, states, kinds, p_lo, p_hi, used, pair_rec, r_state, r_pred = solution
     o_first, o_stop, o_time = obs
     fx, fy, fradius = fixes
-    edge_len, edge_speed, edge_u, edge_v, edge_twin, out_ptr, state_edge, geom = net
+    edge_len, edge_speed, edge_u, edge_v, _, out_ptr, state_edge, geom = net
     odometer, speed_m, slack_m, unknown_lo, unknown_hi = travel
     n_pieces = len(p_lo)
     n_used = len(used)
@@ -223,7 +132,8 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     out_e, out_lo, out_hi = np.empty(64, dtype=np.int64), np.empty(64), np.empty(64)
     along_all = np.empty(n_used)
     jumps = np.zeros(n_pieces, dtype=np.int64)
-    loop = np.zeros(n_pieces, dtype=np.bool_)
+    removed = np.zeros(n_pieces, dtype=np.int64)
+    em_pad, ox, oy, osigma, params, loop_penalty, loop_net = loops
     path_e, path_lo, path_hi = np.empty(64, dtype=np.int64), np.empty(64), np.empty(64)
     move_e, move_lo, move_hi = np.empty(64, dtype=np.int64), np.empty(64), np.empty(64)
     tail_e, tail_lo, tail_hi = np.empty(64, dtype=np.int64), np.empty(64), np.empty(64)
@@ -363,12 +273,18 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
                         )
                         n_path += 1
             along_all[t + 1] = done + path_hi[n_path - 1] - path_lo[n_path - 1]
-        loop[p] = _may_loop(path_e, path_lo, path_hi, n_path, edge_len, edge_u, edge_v, edge_twin)
-        out_e, out_lo, out_hi = _ensure(out_e, out_lo, out_hi, n_out + n_path)
-        out_e[n_out : n_out + n_path] = path_e[:n_path]
-        out_lo[n_out : n_out + n_path] = path_lo[:n_path]
-        out_hi[n_out : n_out + n_path] = path_hi[:n_path]
-        n_out += n_path
+        # loops the fixes do not support taken out (hmm/loops.py)
+        model = (start, used, states, em_pad, ox, oy, o_time, osigma, params, loop_penalty)
+        e, lo, hi, along_p, removed[p] = collapse_kernel(
+            path_e[:n_path].copy(), path_lo[:n_path].copy(), path_hi[:n_path].copy(),
+            along_all[start:stop], model, travel, loop_net,
+        )  # fmt: skip
+        along_all[start:stop] = along_p
+        out_e, out_lo, out_hi = _ensure(out_e, out_lo, out_hi, n_out + len(e))
+        out_e[n_out : n_out + len(e)] = e
+        out_lo[n_out : n_out + len(e)] = lo
+        out_hi[n_out : n_out + len(e)] = hi
+        n_out += len(e)
         row_ptr[p + 1] = n_out
     return (
         row_ptr,
@@ -377,7 +293,7 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
         out_hi[:n_out].copy(),
         along_all,
         jumps,
-        loop,
+        removed,
     )
 
 
@@ -449,46 +365,3 @@ def _retract(path_e, path_lo, path_hi, n_path, done, edge, offset, limit):  # ty
         if cut > limit:
             break
     return n_path, done
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _visit(nodes, at, m, node, here):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """Add a node passed, unless it repeats the last one passed (the path's node visits)."""
-    if m == 0 or nodes[m - 1] != node or abs(at[m - 1] - here) > EPS_M:
-        nodes[m], at[m] = node, here
-        m += 1
-    return m
-
-
-@njit(cache=True, nogil=True)
-def _may_loop(path_e, path_lo, path_hi, n_path, edge_len, edge_u, edge_v, edge_twin):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """
-    Whether :func:`~mapmatch.hmm.loops.collapse_loops` finds a loop to price in this path.
-
-    The path passes a node twice (at different distances along it), or drives back from a
-    mid-road U-turn over the place where it turned.
-    """
-    nodes = np.empty(2 * n_path, dtype=np.int64)
-    at = np.empty(2 * n_path)
-    m = 0
-    base = 0.0
-    for k in range(n_path):
-        e, lo, hi = path_e[k], path_lo[k], path_hi[k]
-        if lo <= EPS_M:
-            m = _visit(nodes, at, m, edge_u[e], base)
-        base += hi - lo
-        if hi >= edge_len[e] - EPS_M:
-            m = _visit(nodes, at, m, edge_v[e], base)
-    order = np.argsort(nodes[:m], kind="mergesort")
-    for i in range(1, m):
-        j, k = order[i - 1], order[i]
-        if nodes[j] == nodes[k] and at[k] > at[j] + EPS_M:
-            return True
-    for k in range(n_path - 1):
-        e, turn = path_e[k], path_hi[k]
-        if edge_twin[e] != path_e[k + 1] or turn >= edge_len[e] - EPS_M:
-            continue
-        for j in range(k + 2, n_path):
-            if path_e[j] == e and path_lo[j] - EPS_M <= turn <= path_hi[j] + EPS_M:
-                return True
-    return False

@@ -100,16 +100,18 @@ def _viterbi_kernel(em, tr):  # type: ignore[no-untyped-def]  # pragma: no cover
 
 
 @njit(cache=True, nogil=True)
-def _logsumexp(values):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+def _logsumexp(values, n):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """log(sum(exp(values[:n]))); ``-inf`` entries (padding) add nothing and are skipped."""
     top = -np.inf
-    for v in values:
-        if v > top:
-            top = v
+    for i in range(n):
+        if values[i] > top:
+            top = values[i]
     if top == -np.inf:
         return -np.inf
     acc = 0.0
-    for v in values:
-        acc += np.exp(v - top)
+    for i in range(n):
+        if values[i] > -np.inf:  # exp(-inf) is 0: skipping it changes nothing
+            acc += np.exp(values[i] - top)
     return top + np.log(acc)
 
 
@@ -120,6 +122,12 @@ def _posterior_kernel(em, tr, starts, stops):  # type: ignore[no-untyped-def]  #
     alpha = np.full((n_steps, width), -np.inf)
     beta = np.full((n_steps, width), -np.inf)
     work = np.empty(width)
+    # candidates of each fix: the padding (-inf emissions) comes after them
+    size = np.zeros(n_steps, dtype=np.int64)
+    for t in range(n_steps):
+        for k in range(width):
+            if em[t, k] > -np.inf:
+                size[t] = k + 1
     for p in range(len(starts)):
         s, e = starts[p], stops[p]
         for k in range(width):
@@ -129,17 +137,17 @@ def _posterior_kernel(em, tr, starts, stops):  # type: ignore[no-untyped-def]  #
                 if em[t, k] == -np.inf:
                     alpha[t, k] = -np.inf
                     continue
-                for j in range(width):
+                for j in range(size[t - 1]):
                     work[j] = alpha[t - 1, j] + tr[t - 1, j, k]
-                alpha[t, k] = _logsumexp(work) + em[t, k]
+                alpha[t, k] = _logsumexp(work, size[t - 1]) + em[t, k]
         for k in range(width):
             beta[e - 1, k] = 0.0
         for t in range(e - 2, s - 1, -1):
             for j in range(width):
-                for k in range(width):
+                for k in range(size[t + 1]):
                     work[k] = tr[t, j, k] + em[t + 1, k] + beta[t + 1, k]
-                beta[t, j] = _logsumexp(work)
-        z = _logsumexp(alpha[e - 1])
+                beta[t, j] = _logsumexp(work, size[t + 1])
+        z = _logsumexp(alpha[e - 1], width)
         for t in range(s, e):
             for k in range(width):
                 v = alpha[t, k] + beta[t, k] - z
