@@ -217,7 +217,7 @@ def _pair_routes(graph, ws, scratch, uturn_cost_m, table, from_edge, to_edge, bo
     t_bound, t_sources, t_ptr, t_state, t_order, t_dist, t_time, t_turns, copy_ptr, copy_state = (
         table
     )
-    fits = True
+    fits = t_bound > -np.inf  # no table (bound -inf) never fits, even with no pairs
     for k in range(len(bounds)):
         fits = fits and bounds[k] <= t_bound
     if fits:

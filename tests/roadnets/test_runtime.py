@@ -102,7 +102,9 @@ def test_freeze_after_load_leaves_later_collections_nothing_old_to_walk(
 ) -> None:
     try:
         frozen = roadnets.freeze_after_load()
-        assert frozen == gc.get_freeze_count() > 10_000
+        assert frozen > 10_000
+        # objects freed since (frames, temporaries) leave the permanent generation
+        assert 0.99 * frozen <= gc.get_freeze_count() <= frozen
         assert len(gc.get_objects()) < 1000  # what a full collection still walks
         assert default_net.nearby_edges(np.zeros(1), np.zeros(1), 50.0) is not None
     finally:
