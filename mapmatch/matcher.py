@@ -10,6 +10,7 @@ held against the fused trip distance.
 from __future__ import annotations
 
 import time
+import weakref
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -127,7 +128,7 @@ def match(
     )
     matched_length = float(sum(s.length_m for s in assembled.segments))
     points = assembled.points
-    complete = len(assembled.segments) == 1 and bool(points.matched[[0, -1]].all())
+    complete = len(assembled.segments) == 1 and bool(points.matched[0] and points.matched[-1])
     check = check_distance(
         trace_id=trace.trace_id,
         matched_length_m=matched_length,
@@ -143,7 +144,7 @@ def match(
     timings["total"] = sum(timings.values())
     stats = MatchStats(
         points=n,
-        matched_points=int(points.matched.sum()),
+        matched_points=int(np.count_nonzero(points.matched)),
         candidates=len(cands),
         reordered_rows=trace.report.reordered_rows,
         input_rows=trace.report.input_rows,
@@ -154,12 +155,12 @@ def match(
         timings_s=timings,
         warnings=tuple(trace.report.warnings),
         model_points=len(solution.used),
-        outliers=int(points.outlier.sum()),
+        outliers=int(np.count_nonzero(points.outlier)),
         break_repairs=repairs,
     )
     return MatchResult(
         trace_id=trace.trace_id,
-        network={"id": net.network_id, "source": Path(net.source).name, "crs": net.crs},
+        network=_network_ids(net),
         segments=assembled.segments,
         points=points,
         breaks=[s.first for s in assembled.segments[1:]],
@@ -169,6 +170,22 @@ def match(
         diagnostics=_diagnostics(net, obs, solution) if diagnostics else None,
         config=config,
     )
+
+
+#: ``MatchResult.network`` of each network matched on (its id, file name and CRS), made once.
+_NETWORK_IDS: weakref.WeakKeyDictionary[RoadNetwork, dict[str, str]] = weakref.WeakKeyDictionary()
+
+
+def _network_ids(net: RoadNetwork) -> dict[str, str]:
+    """The network's id, source file name and CRS, for the result (a new dict each time)."""
+    ids = _NETWORK_IDS.get(net)
+    if ids is None:
+        ids = _NETWORK_IDS[net] = {
+            "id": net.network_id,
+            "source": Path(net.source).name,
+            "crs": net.crs,
+        }
+    return dict(ids)
 
 
 def _evidence(trace: Trace, fixes: Fixes, config: MatchConfig) -> Evidence:

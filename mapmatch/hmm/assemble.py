@@ -20,7 +20,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from mapmatch.hmm.geometry import point_on_edge, project_kernel, stretch_vertices
+from mapmatch.hmm.geometry import (
+    network_geometry,
+    point_on_edge,
+    project_kernel,
+    stretch_vertices,
+)
 from mapmatch.hmm.loops import loop_network
 from mapmatch.hmm.observations import travel_arrays
 from mapmatch.hmm.params import model_params
@@ -29,8 +34,6 @@ from mapmatch.hmm.transition import route_inputs
 from mapmatch.result import MatchedPoints, Segment
 
 if TYPE_CHECKING:
-    from typing import Any
-
     from mapmatch.config import MatchConfig
     from mapmatch.hmm.observations import Observations
     from mapmatch.hmm.solution import Solution
@@ -38,7 +41,7 @@ if TYPE_CHECKING:
     from mapmatch.types import BoolArray, FloatArray
     from roadnets import RoadNetwork
 
-__all__ = ["Assembled", "assemble", "geometry"]
+__all__ = ["Assembled", "assemble"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,13 +52,6 @@ class Assembled:
     points: MatchedPoints
     jumps: int  # moves that could not continue from the path's front (drawn as a jump)
     loops: int  # loops the fixes did not support, taken out
-
-
-def geometry(net: RoadNetwork) -> tuple[Any, ...]:
-    """``(edge_len, geom_ptr, geom_x, geom_y, geom_cum, vertex_pos)`` for the path kernels."""
-    a = net.arrays
-    vertex_pos = net._vertex_position
-    return (a.edge_length_m, a.edge_geom_ptr, a.geom_x, a.geom_y, a.geom_cum_m, vertex_pos)
 
 
 @njit(cache=True, nogil=True)
@@ -70,6 +66,29 @@ def _locate(edge, start_m, end_m, along):  # type: ignore[no-untyped-def]  # pra
             before = acc - driven
             return edge[i], min(max(start_m[i] + (along - before), start_m[i]), end_m[i])
     return -1, np.nan
+
+
+@njit(cache=True, nogil=True)
+def _assemble_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    walk, place, loops
+):
+    """:func:`walk_pieces`, then :func:`_place` on its paths: one call (argument tuples of each)."""
+    solution, obs, fixes, travel, net, routing, hold_limit = walk
+    row_ptr, w_edge, w_lo, w_hi, along, jumps, removed = walk_pieces(
+        solution, obs, fixes, travel, net, routing, hold_limit, loops
+    )
+    pieces, obs_place, fix_place, post, thinning, geom, ids = place
+    placed = _place(
+        (row_ptr, w_edge, w_lo, w_hi, along),
+        pieces,
+        obs_place,
+        fix_place,
+        post,
+        thinning,
+        geom,
+        ids,
+    )
+    return placed, jumps.sum(), removed.sum()
 
 
 @njit(cache=True, nogil=True)
@@ -225,7 +244,7 @@ def assemble(
     """
     a = net.arrays
     c, used, states = solution.cands, solution.used, solution.states
-    geom = geometry(net)
+    geom = network_geometry(net)
     f8 = np.float64
     x = np.ascontiguousarray(x, f8)
     y = np.ascontiguousarray(y, f8)
@@ -233,7 +252,8 @@ def assemble(
     p_lo = np.array([start for start, _ in solution.pieces], dtype=np.int64)
     p_hi = np.array([stop for _, stop in solution.pieces], dtype=np.int64)
     routes = solution.routes
-    walked = walk_pieces(
+    sigma = np.ascontiguousarray(obs.sigma_m, f8)
+    walk = (
         (c.ptr, c.edge, c.offset_m, states, solution.kinds, p_lo, p_hi, used,
          routes.record, routes.table.state, routes.table.pred),
         (obs.first, obs.stop, np.ascontiguousarray(obs.time_s, f8)),
@@ -243,22 +263,27 @@ def assemble(
          net.turns.state_edge, geom),
         route_inputs(net),
         float(hold_limit_m),
-        (np.ascontiguousarray(solution.log_emission, f8), np.ascontiguousarray(obs.x, f8),
-         np.ascontiguousarray(obs.y, f8), np.ascontiguousarray(obs.sigma_m, f8),
-         model_params(config), float(config.loop_penalty), loop_network(net)),
     )  # fmt: skip
-    row_ptr, w_edge, w_lo, w_hi, along, jumps, loops = walked
+    loops = (
+        np.ascontiguousarray(solution.log_emission, f8),
+        np.ascontiguousarray(obs.x, f8),
+        np.ascontiguousarray(obs.y, f8),
+        sigma,
+        model_params(config),
+        float(config.loop_penalty),
+        loop_network(net),
+    )
     chosen = solution.post[np.arange(len(used)), np.maximum(states, 0)]
-    placed = _place(
-        (row_ptr, w_edge, w_lo, w_hi, along),
+    place = (
         (p_lo, p_hi, used),
-        (obs.first, obs.stop, obs.of_fix, obs.stray, np.ascontiguousarray(obs.sigma_m, f8)),
+        (obs.first, obs.stop, obs.of_fix, obs.stray, sigma),
         (x, y, radius, np.ascontiguousarray(outlier, np.bool_)),
         np.ascontiguousarray(chosen, f8),
         float(config.thinning_sigmas),
         geom,
         (a.node_osm_id, a.edge_u, a.edge_v, a.edge_key),
     )
+    placed, jumps, removed = _assemble_kernel(walk, place, loops)
     (t_ptr, t_edge, t_lo, t_hi), first_fix, last_fix, per_fix = placed
     matched, in_model, edge, offset, confidence, segment_of, px, py, distance, u, v, key = per_fix
     segments = [
@@ -288,6 +313,6 @@ def assemble(
             interpolated=matched & ~in_model,
             outlier=np.asarray(outlier, dtype=bool),
         ),
-        jumps=int(jumps.sum()),
-        loops=int(loops.sum()),
+        jumps=int(jumps),
+        loops=int(removed),
     )

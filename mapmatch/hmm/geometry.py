@@ -2,10 +2,22 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
 from numba import njit
 
-__all__ = ["point_on_edge", "project_kernel", "stretch_vertices"]
+if TYPE_CHECKING:
+    from roadnets import RoadNetwork
+
+__all__ = ["network_geometry", "point_on_edge", "project_kernel", "stretch_vertices"]
+
+
+def network_geometry(net: RoadNetwork) -> tuple[Any, ...]:
+    """``(edge_len, geom_ptr, geom_x, geom_y, geom_cum, vertex_pos)``: what these kernels read."""
+    a = net.arrays
+    vertex_pos = net._vertex_position  # the key RoadNetwork.point_on_edge searches
+    return (a.edge_length_m, a.edge_geom_ptr, a.geom_x, a.geom_y, a.geom_cum_m, vertex_pos)
 
 
 @njit(cache=True, nogil=True)

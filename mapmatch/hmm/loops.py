@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit
 
 from mapmatch.hmm.emission import distance_score
-from mapmatch.hmm.geometry import point_on_edge
+from mapmatch.hmm.geometry import network_geometry, point_on_edge
 from mapmatch.hmm.observations import between_kernel, travel_arrays
 from mapmatch.hmm.params import P_UTURN_PENALTY, model_params
 from mapmatch.hmm.transition import transition_score
@@ -126,7 +126,7 @@ def _loops(e, lo, hi, net):  # type: ignore[no-untyped-def]  # pragma: no cover 
     mid-road U-turn to the place where it turned; sorted by length, stably.
     """
     edge_len, edge_u, edge_v, edge_twin, node_x, node_y = net[:6]
-    geom = net[9]
+    geom = net[8]
     n = len(e)
     nodes = np.empty(2 * n, dtype=np.int64)
     at = np.empty(2 * n)
@@ -367,8 +367,6 @@ def collapse_kernel(e, lo, hi, along, model, travel, net):  # type: ignore[no-un
 def loop_network(net: RoadNetwork) -> tuple[Any, ...]:
     """The network arrays :func:`collapse_kernel` reads."""
     a, turns = net.arrays, net.turns
-    vertex_pos = net._vertex_position
-    geom = (a.edge_length_m, a.edge_geom_ptr, a.geom_x, a.geom_y, a.geom_cum_m, vertex_pos)
     return (
         a.edge_length_m,
         a.edge_u,
@@ -378,8 +376,7 @@ def loop_network(net: RoadNetwork) -> tuple[Any, ...]:
         a.node_y,
         a.out_ptr,
         (turns.trans_ptr, turns.trans_to, turns.state_edge),
-        0,
-        geom,
+        network_geometry(net),
     )
 
 

@@ -88,6 +88,7 @@ import numpy as np
 from mapmatch.config import MatchConfig
 from mapmatch.distance import DistanceCheck, check_distance, chord_length_m
 from mapmatch.errors import ConfigError, InputTypeError, InvalidTraceError, NoCandidatesError
+from mapmatch.hmm.emission import emissions
 from mapmatch.hmm.fixes import hold_limit_m
 from mapmatch.hmm.routes import ROUTE_STANDSTILL
 from mapmatch.hmm.selection import find_displaced
@@ -623,6 +624,8 @@ class OnlineMatcher:
         out = _Settled.none(self._open_fix)
         if not len(rnd.used):
             return self._settle_unmatched(rnd, out, closing=closing)
+        if len(rnd.used) == 1 and not closing:
+            return self._settle_unmatched(rnd, out, closing=False)  # nothing to cut yet
         ws = self._solve(rnd)
         sol = ws.solution
         cut = _Cut(len(sol.pieces) - 1, len(sol.used) - 1, -1, -1, 0.0) if closing else None
@@ -930,13 +933,19 @@ class OnlineMatcher:
         used = np.concatenate((rnd.used, newer)).astype(np.int64)
         if not len(used):
             return None
-        cut_after = cuts(used, rnd.missing_before)  # it runs on unchanged past the final ones
-        sol = solve(
-            self.net, model.obs, self._anchored(rnd, cands_all), used, cut_after, self.config
-        )
-        t = int(np.flatnonzero(sol.states >= 0)[-1])
-        wc = sol.cands
-        row = int(wc.ptr[t] + sol.states[t])
+        cands_all = self._anchored(rnd, cands_all)
+        if len(used) == 1:  # one observation: its emissions are the whole model
+            wc = cands_all.subset(used)
+            em = emissions(model.obs, wc, np.zeros(len(wc), np.int64) + used[0], self.config)
+            t, row = 0, int(np.argmax(em))
+            confidence = float(1.0 / np.exp(em - em[row]).sum())
+        else:
+            cut_after = cuts(used, rnd.missing_before)  # unchanged past the final ones
+            sol = solve(self.net, model.obs, cands_all, used, cut_after, self.config)
+            t = int(np.flatnonzero(sol.states >= 0)[-1])
+            wc = sol.cands
+            row = int(wc.ptr[t] + sol.states[t])
+            confidence = float(sol.post[t, sol.states[t]])
         k = int(used[t])
         edge = int(wc.edge[row])
         lon, lat = self.net.unproject(wc.x[row : row + 1], wc.y[row : row + 1])
@@ -953,7 +962,7 @@ class OnlineMatcher:
             key=int(key[0]),
             offset_m=float(wc.offset_m[row]),
             distance_m=float(wc.distance_m[row]),
-            confidence=float(sol.post[t, sol.states[t]]),
+            confidence=confidence,
         )
 
     def close(self, *, fused_distance_m: float | None = None) -> MatchResult:
