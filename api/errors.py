@@ -50,8 +50,11 @@ __all__ = [
     "ServiceError",
     "TooManyColumnsError",
     "TooManyPointsError",
+    "TripTooLargeError",
+    "TripsFullError",
     "UnauthorizedError",
     "UnknownNetworkError",
+    "UnknownTripError",
     "UnsupportedEncodingError",
     "UnsupportedMediaTypeError",
     "error_answer",
@@ -91,6 +94,18 @@ class OptionError(ConfigError):
 
 class UnknownNetworkError(ServiceError, LookupError):
     """The request names a network this service does not serve."""
+
+
+class UnknownTripError(ServiceError, LookupError):
+    """No live trip of that id is open in this worker (never made, closed or expired)."""
+
+
+class TripsFullError(ServiceError, RuntimeError):
+    """The worker holds ``MAPMATCH_MAX_TRIPS`` open live trips already."""
+
+
+class TripTooLargeError(ServiceError, ValueError):
+    """A live trip holds ``MAPMATCH_TRIP_MAX_BYTES`` already: it takes no more fixes."""
 
 
 class UnsupportedMediaTypeError(ServiceError, ValueError):
@@ -166,6 +181,8 @@ ERROR_TABLE: Final[tuple[ErrorRule, ...]] = (
     ErrorRule(IncompleteBodyError, 400, "incomplete_body", "the client left mid-body"),
     ErrorRule(UnauthorizedError, 401, "unauthorized", "bearer token missing or wrong"),
     ErrorRule(UnknownNetworkError, 404, "unknown_network", "no served network has that id"),
+    ErrorRule(UnknownTripError, 404, "unknown_trip", "no open live trip has that id here"),
+    ErrorRule(TripTooLargeError, 413, "trip_too_large", "a live trip over MAPMATCH_TRIP_MAX_BYTES"),
     ErrorRule(BodyTooLargeError, 413, "body_too_large", "body over MAPMATCH_MAX_BODY_BYTES"),
     ErrorRule(TooManyPointsError, 413, "too_many_points", "more points than MAPMATCH_MAX_POINTS"),
     ErrorRule(
@@ -191,6 +208,7 @@ ERROR_TABLE: Final[tuple[ErrorRule, ...]] = (
     ErrorRule(NoCandidatesError, 422, "no_road_nearby", "no point has a road nearby"),
     ErrorRule(NotReadyError, 503, "not_ready", "the networks are still loading"),
     ErrorRule(OverloadedError, 503, "overloaded", "no match thread freed up within the budget"),
+    ErrorRule(TripsFullError, 503, "too_many_trips", "MAPMATCH_MAX_TRIPS live trips are open"),
     ErrorRule(MatchTimeoutError, 504, "timeout", "the match ran past its time budget"),
     ErrorRule(RoadNetworkError, 503, "network_unavailable", "a network failed to load"),
     ErrorRule(MapMatchError, 422, "unprocessable", "any other deliberate error of the core"),

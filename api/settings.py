@@ -35,6 +35,10 @@ variable                        meaning
 ``MAPMATCH_ACCESS_LOG``         one JSON line per request on stderr (true)
 ``MAPMATCH_DOCS_ASSETS``        ``bundled``: ``/docs`` and ``/redoc`` load the packaged
                                 Swagger UI and ReDoc (offline); ``cdn``: FastAPI's CDN links
+``MAPMATCH_MAX_TRIPS``          live trips (``/v1/trips``) open at once per worker (10 000)
+``MAPMATCH_TRIP_IDLE_S``        a live trip without a request this long expires (600 s)
+``MAPMATCH_TRIP_MAX_BYTES``     memory a live trip may hold; more fixes are refused (8 MB)
+``MAPMATCH_TRIP_MAX_LAG_S``     longest lag a live trip may ask for, seconds (600)
 ==============================  ==============================================================
 """
 
@@ -144,6 +148,24 @@ class Settings(BaseSettings):
         description="Browser origins allowed to call the service (CORS); '*' = any.",
     )
     access_log: bool = Field(default=True, description="Write one JSON line per request.")
+    max_trips: int = Field(
+        default=10_000, ge=1, description="Live trips open at once per worker process."
+    )
+    trip_idle_s: float = Field(
+        default=600.0,
+        gt=0,
+        allow_inf_nan=False,
+        description="Seconds without a request after which a live trip expires.",
+    )
+    trip_max_bytes: int = Field(
+        default=8_000_000, ge=100_000, description="Memory a live trip may hold, bytes."
+    )
+    trip_max_lag_s: float = Field(
+        default=600.0,
+        gt=0,
+        allow_inf_nan=False,
+        description="Longest lag a live trip may ask for, seconds.",
+    )
     docs_assets: Literal["bundled", "cdn"] = Field(
         default="bundled",
         description="Where /docs and /redoc get Swagger UI and ReDoc: packaged files or a CDN.",
