@@ -131,3 +131,14 @@ def test_issue_5_many_breaks_cost_a_bounded_number_of_solves(
     assert len(result.breaks) == 4
     full_solves = [n for n in calls if n > 2]
     assert len(full_solves) <= 2  # the first solve and at most one after the repairs
+
+
+def test_a_trace_with_one_fix_near_a_road_matches_that_fix(
+    default_net: roadnets.RoadNetwork,
+) -> None:
+    # one fix has candidates, the other none: the trellis has no candidate pair at all
+    a = default_net.arrays
+    lon, lat = default_net.unproject(a.node_x[:1], a.node_y[:1])
+    trace = mapmatch.Trace(time=[0.0, 1.0], lat=[lat[0], lat[0]], lon=[lon[0], lon[0] + 0.05])
+    result = mapmatch.match(trace, default_net)
+    assert result.points.matched.tolist() == [True, False]
