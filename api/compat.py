@@ -26,12 +26,11 @@ from typing import TYPE_CHECKING, Any, Final, TypeVar
 import numpy as np
 from starlette.responses import JSONResponse, Response
 
-import mapmatch
 from api.costs import check_budget, match_cost
 from api.deps import get_metrics, get_service
-from api.errors import INTERNAL_ERROR, MatchTimeoutError, OptionError, error_answer, rule_for
+from api.errors import INTERNAL_ERROR, OptionError, error_answer, rule_for
 from api.middleware import SCOPE_KEY
-from api.service import MatchOutcome
+from api.service import MatchOutcome, match_within, past_budget
 from mapmatch import ConfigError, MatchConfig
 
 if TYPE_CHECKING:
@@ -168,11 +167,6 @@ async def run_compat(
     budget_s = service.runner.budget_s
     deadline = time.monotonic() + budget_s
 
-    def check_deadline() -> None:
-        if time.monotonic() > deadline:
-            msg = f"the match ran past the {budget_s:g} s time budget"
-            raise MatchTimeoutError(msg)
-
     def job() -> MatchOutcome:
         started = time.perf_counter()
         parsed, options = build()
@@ -180,9 +174,11 @@ async def run_compat(
         config = _config(parsed.overrides)
         cost = match_cost(parsed.trace, config, service.networks.density(net.network_id))
         check_budget(cost, service.memory_budget_mb, parsed.overrides)
-        check_deadline()
-        result = mapmatch.match(parsed.trace, net, config, diagnostics=parsed.diagnostics)
-        check_deadline()
+        past_budget(budget_s, deadline)
+        result = match_within(
+            budget_s, deadline, parsed.trace, net, config, diagnostics=parsed.diagnostics
+        )
+        past_budget(budget_s, deadline)
         content = answer(Matched(parsed, result, net), options)
         return MatchOutcome(
             content=content,

@@ -22,7 +22,6 @@ requests of its process; numba's routing and Viterbi kernels release it (``nogil
 from __future__ import annotations
 
 import asyncio
-import inspect
 import json
 import math
 import threading
@@ -57,12 +56,15 @@ if TYPE_CHECKING:
 
     from api.networks import NetworkRegistry
     from api.settings import Settings
+    from roadnets import RoadNetwork
 
 __all__ = [
     "MatchOutcome",
     "MatchRunner",
     "MatchService",
+    "match_within",
     "parse_json",
+    "past_budget",
     "validation_error",
 ]
 
@@ -70,8 +72,29 @@ T = TypeVar("T")
 
 _SHOW: Final = 5  # problems quoted in one message
 _BASE_CONFIG: Final = MatchConfig()
-#: Whether the matcher can stop itself at a deadline (a cooperative check between its stages).
-_MATCH_TAKES_DEADLINE: Final = "deadline" in inspect.signature(mapmatch.match).parameters
+
+
+def past_budget(budget_s: float, deadline: float) -> None:
+    """Raise :class:`MatchTimeoutError` when ``deadline`` (``time.monotonic()``) has passed."""
+    if time.monotonic() > deadline:
+        msg = f"the match ran past the {budget_s:g} s time budget"
+        raise MatchTimeoutError(msg)
+
+
+def match_within(
+    budget_s: float,
+    deadline: float,
+    trace: mapmatch.Trace,
+    net: RoadNetwork,
+    config: MatchConfig,
+    **options: Any,
+) -> mapmatch.MatchResult:
+    """:func:`mapmatch.match` stopped between its stages once ``deadline`` has passed (504)."""
+    try:
+        return mapmatch.match(trace, net, config, deadline=deadline, **options)
+    except mapmatch.DeadlineExceededError as exc:
+        msg = f"the match ran past the {budget_s:g} s time budget ({exc.stage} stage done)"
+        raise MatchTimeoutError(msg) from None
 
 
 @dataclass(frozen=True, slots=True)
@@ -211,7 +234,7 @@ class MatchService:
 
         deadline
             ``time.monotonic()`` past which the caller no longer waits: checked between the
-            stages (and inside the match when :func:`mapmatch.match` takes a deadline), so an
+            stages and inside the match (between its own stages), so an
             abandoned request stops as early as it can and frees its thread.
 
         Raises
@@ -231,8 +254,9 @@ class MatchService:
         cost = match_cost(trace, config, self.networks.density(net.network_id))
         check_budget(cost, self.memory_budget_mb, overrides)
         self._check_deadline(deadline)
-        extra: dict[str, Any] = {"deadline": deadline} if _MATCH_TAKES_DEADLINE else {}
-        result = mapmatch.match(trace, net, config, fused_distance_m=fused_m, **extra)
+        result = match_within(
+            self.runner.budget_s, deadline, trace, net, config, fused_distance_m=fused_m
+        )
         self._check_deadline(deadline)
         if query.polyline is None:
             content = geojson_bytes(result)  # written from the result's arrays
@@ -249,9 +273,7 @@ class MatchService:
         )
 
     def _check_deadline(self, deadline: float) -> None:
-        if time.monotonic() > deadline:
-            msg = f"the match ran past the {self.runner.budget_s:g} s time budget"
-            raise MatchTimeoutError(msg)
+        past_budget(self.runner.budget_s, deadline)
 
     def _from_json(
         self, body: bytes, query: MatchQuery

@@ -16,6 +16,7 @@ from mapmatch.config import OVERRIDABLE, MatchConfig, Param, parameters
 from mapmatch.distance import DistanceCheck
 from mapmatch.errors import (
     ConfigError,
+    DeadlineExceededError,
     InvalidTraceError,
     MapMatchError,
     NoCandidatesError,
@@ -67,6 +68,7 @@ def __dir__() -> list[str]:
 __all__ = [
     "OVERRIDABLE",
     "ConfigError",
+    "DeadlineExceededError",
     "Diagnostics",
     "DistanceCheck",
     "InvalidTraceError",

@@ -18,6 +18,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "ConfigError",
+    "DeadlineExceededError",
     "InputTypeError",
     "InvalidTraceError",
     "MapMatchError",
@@ -103,6 +104,26 @@ class ConfigError(MapMatchError, ValueError):
     def __init__(self, message: str, *, field: str | None = None) -> None:
         super().__init__(message)
         self.field = field
+
+
+class DeadlineExceededError(MapMatchError, TimeoutError):
+    """
+    A match ran past the ``deadline`` it was given (checked between its stages).
+
+    Parameters
+    ----------
+    trace_id
+        Id of the trace.
+    stage
+        The stage that had just finished when the deadline was found passed.
+    """
+
+    def __init__(self, trace_id: str, stage: str) -> None:
+        self.trace_id, self.stage = trace_id, stage
+        super().__init__(f"trace {trace_id!r}: past its deadline after the {stage} stage")
+
+    def __reduce__(self) -> tuple[type[DeadlineExceededError], tuple[str, str]]:
+        return type(self), (self.trace_id, self.stage)
 
 
 class NoCandidatesError(MapMatchError, ValueError):

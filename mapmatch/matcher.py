@@ -18,7 +18,7 @@ import numpy as np
 
 from mapmatch.config import MatchConfig
 from mapmatch.distance import Evidence, check_distance, chord_length_m
-from mapmatch.errors import NoCandidatesError
+from mapmatch.errors import DeadlineExceededError, NoCandidatesError
 from mapmatch.hmm.assemble import assemble
 from mapmatch.hmm.fixes import (
     Fixes,
@@ -52,6 +52,7 @@ def match(
     *,
     fused_distance_m: float | None = None,
     diagnostics: bool = False,
+    deadline: float | None = None,
 ) -> MatchResult:
     """
     Match a trace onto a road network.
@@ -69,6 +70,10 @@ def match(
         no odometer column.
     diagnostics
         Also return every candidate with its scores (``result.diagnostics``), for inspection.
+    deadline
+        A :func:`time.monotonic` time past which the match gives up: checked between its
+        stages (candidates, selection, Viterbi, break repair, assembly), so a caller with a
+        time budget (the HTTP service) gets its thread back soon after the budget is spent.
 
     Returns
     -------
@@ -81,6 +86,8 @@ def match(
         No fix has a road within its search radius.
     InputTypeError
         ``trace`` is not a :class:`Trace` or ``net`` not a :class:`~roadnets.RoadNetwork`.
+    DeadlineExceededError
+        ``deadline`` passed before the match was done.
     """
     check_match_inputs(trace, net)
     config = config or _DEFAULT
@@ -99,20 +106,24 @@ def match(
     if len(cands) == 0:
         raise NoCandidatesError(trace.trace_id, float(fixes.radius_m.max()))
     clock = _lap(timings, "candidates", clock)
+    _check_deadline(deadline, trace, "candidates")
 
     outlier = find_displaced(fixes, obs, cands, config)
     # a stretch of fixes with no road nearby (not a lone stray fix), and the start of a new
     # segment of the trace file (a GPX trkseg), split the trace
     used, missing_before, cut_after = model_fixes(cands, outlier, fixes.segment_starts, obs.first)
     clock = _lap(timings, "selection", clock)
+    _check_deadline(deadline, trace, "selection")
 
     solution = solve(net, obs, cands, used, cut_after, config)
     repairs = 0
+    _check_deadline(deadline, trace, "viterbi")
     if solution.breaks and config.max_break_repairs:
         repaired = repair_breaks(net, obs, cands, solution, missing_before, config)
         if repaired is not None:
             solution, repairs = repaired
     clock = _lap(timings, "hmm", clock)
+    _check_deadline(deadline, trace, "break repair")
 
     assembled = assemble(
         net,
@@ -126,6 +137,7 @@ def match(
         hold_limit_m(fixes, config),
         config,
     )
+    _check_deadline(deadline, trace, "assembly")
     matched_length = float(sum(s.length_m for s in assembled.segments))
     points = assembled.points
     complete = len(assembled.segments) == 1 and bool(points.matched[0] and points.matched[-1])
@@ -239,6 +251,11 @@ def _diagnostics(net: RoadNetwork, obs: Observations, solution: Solution) -> Dia
         posterior=solution.post[point_of, rank],
         chosen=chosen,
     )
+
+
+def _check_deadline(deadline: float | None, trace: Trace, stage: str) -> None:
+    if deadline is not None and time.monotonic() > deadline:
+        raise DeadlineExceededError(trace.trace_id, stage)
 
 
 def _lap(timings: dict[str, float], name: str, since: float) -> float:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pickle
+import time
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -142,3 +144,14 @@ def test_a_trace_with_one_fix_near_a_road_matches_that_fix(
     trace = mapmatch.Trace(time=[0.0, 1.0], lat=[lat[0], lat[0]], lon=[lon[0], lon[0] + 0.05])
     result = mapmatch.match(trace, default_net)
     assert result.points.matched.tolist() == [True, False]
+
+
+def test_a_match_past_its_deadline_stops_after_the_stage_that_found_it(
+    default_net: roadnets.RoadNetwork,
+) -> None:
+    trace = simulate_trips(default_net, SimulationConfig(), count=1, seed=5)[0].trace
+    with pytest.raises(mapmatch.DeadlineExceededError, match="candidates stage") as caught:
+        mapmatch.match(trace, default_net, deadline=time.monotonic() - 1.0)
+    assert pickle.loads(pickle.dumps(caught.value)).stage == "candidates"
+    done = mapmatch.match(trace, default_net, deadline=time.monotonic() + 3600.0)
+    assert done.stats.matched_points == done.stats.points

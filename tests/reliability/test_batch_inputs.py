@@ -242,3 +242,18 @@ def test_crs_flag_reads_gcj02_traces(
 def test_summary_header_is_unchanged() -> None:
     text = io.StringIO(",".join(SUMMARY_COLUMNS))
     assert next(csv.reader(text))[:5] == ["trace_id", "source", "index", "output", "status"]
+
+
+def test_a_reader_that_leaves_early_gets_no_traceback(cache_dir: Path) -> None:
+    # `mapmatch network info --json | head -c 1`: stdout's reader is gone before we write
+    argv = [sys.executable, "-m", "mapmatch", "network", "info", "--cache-dir", str(cache_dir)]
+    with subprocess.Popen(
+        [*argv, "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    ) as proc:
+        assert proc.stdout is not None
+        assert proc.stderr is not None
+        proc.stdout.close()
+        err = proc.stderr.read().decode()
+        assert proc.wait(timeout=120) == 141, err
+    assert "Traceback" not in err, err
+    assert "BrokenPipe" not in err, err
