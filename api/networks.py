@@ -12,7 +12,6 @@ collections do not walk them during matches.
 
 from __future__ import annotations
 
-import gc
 import logging
 import threading
 import time
@@ -98,8 +97,7 @@ class NetworkRegistry:
             return
         # What is loaded now lives as long as the process: keep the collector from walking it
         # again and again (full collections of it paused matches for 70-150 ms).
-        gc.collect()
-        gc.freeze()
+        roadnets.freeze_after_load()
         self._ready.set()
         _log.info(
             "networks ready in %.2f s: %s", time.perf_counter() - started, ", ".join(self._nets)
