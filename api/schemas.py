@@ -4,7 +4,7 @@ Request and response models of the HTTP API; every field is documented in OpenAP
 The request envelope and the options are validated with these models (bounds included, so a
 sigma of -1 is a 422 naming ``options.sigma_m`` before the matcher sees it); the points are
 documented here (:class:`PointIn`) but checked by the trace reader. The response side documents what
-``MatchResult.to_geojson()`` produces (DESIGN.md "Output"); the service sends that document as
+``MatchResult.to_geojson()`` produces (docs/DESIGN.md "Output"); the service sends that document as
 it is and does not re-validate it, which would cost more than the match for long traces.
 """
 

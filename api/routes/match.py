@@ -64,7 +64,7 @@ router = APIRouter(tags=["match"])
     "/v1/match",
     summary="Match one trace onto the road network",
     description=(
-        "Answers a GeoJSON FeatureCollection (DESIGN.md's output): one Feature per matched "
+        "Answers a GeoJSON FeatureCollection (docs/DESIGN.md's output): one Feature per matched "
         "segment, then one per point. Content types read: " + ", ".join(MEDIA_TYPES) + "."
     ),
     response_class=GeoJSONResponse,

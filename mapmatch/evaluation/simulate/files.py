@@ -20,7 +20,7 @@ def write_trips(trips: list[SimulatedTrip], out_dir: str | os.PathLike[str]) -> 
     """
     Write ``traces.csv`` and ``truth.jsonl`` into ``out_dir``.
 
-    ``traces.csv`` holds all traces in DESIGN.md's columns; ``truth.jsonl`` one JSON object
+    ``traces.csv`` holds all traces in docs/DESIGN.md's input columns; ``truth.jsonl`` one JSON object
     per trace: true route edges, geometry and length.
     """
     import pandas as pd
