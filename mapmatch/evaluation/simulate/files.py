@@ -20,8 +20,8 @@ def write_trips(trips: list[SimulatedTrip], out_dir: str | os.PathLike[str]) -> 
     """
     Write ``traces.csv`` and ``truth.jsonl`` into ``out_dir``.
 
-    ``traces.csv`` holds all traces in docs/DESIGN.md's input columns; ``truth.jsonl`` one JSON object
-    per trace: true route edges, geometry and length.
+    ``traces.csv`` holds all traces in docs/DESIGN.md's input columns; ``truth.jsonl`` one
+    JSON object per trace: true route edges, geometry and length.
     """
     import pandas as pd
 
