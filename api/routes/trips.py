@@ -46,6 +46,7 @@ from api.service import _config, parse_json, validation_error
 from api.trips import Trip, TripRegistry
 from mapmatch import InvalidTraceError
 from mapmatch.export import geojson_bytes
+from mapmatch.online import DEFAULT_LAG_S
 
 if TYPE_CHECKING:
     from api.metrics import ServiceMetrics
@@ -57,7 +58,6 @@ __all__ = ["TripOpen", "get_trips", "router"]
 
 router = APIRouter(tags=["live trips"])
 _MAKING: Final = threading.Lock()
-_DEFAULT_LAG_S: Final = 30.0
 
 
 class TripOpen(BaseModel):
@@ -77,7 +77,7 @@ class TripOpen(BaseModel):
         default=None, min_length=1, max_length=200, description="Network id; default: the first."
     )
     lag_s: float = Field(
-        default=_DEFAULT_LAG_S,
+        default=DEFAULT_LAG_S,
         ge=0,
         allow_inf_nan=False,
         description="Seconds after which an observation may settle (trip time); at most "

@@ -34,6 +34,7 @@ from typing import Final, NoReturn
 
 from mapmatch.errors import InvalidTraceError
 from mapmatch.trace import FIELD_ALIASES, UERE_M
+from mapmatch.trace.columns import column
 
 __all__ = ["OPTIONAL_FIELDS", "LiveFix", "read_fix"]
 
@@ -41,6 +42,19 @@ __all__ = ["OPTIONAL_FIELDS", "LiveFix", "read_fix"]
 OPTIONAL_FIELDS: Final = ("heading", "speed", "accuracy", "odometer")
 
 _ALIAS_TO_FIELD: Final = {a: f for f, aliases in FIELD_ALIASES.items() for a in aliases}
+
+
+def _range(name: str) -> tuple[float, float]:
+    """``(low, high)`` of a trace column as :mod:`mapmatch.trace.columns` declares it."""
+    col = column(name)
+    return (
+        -math.inf if col.ge is None else col.ge,
+        math.inf if col.le is None else col.le,
+    )
+
+
+#: The bounds of the bounded fields, as the trace columns declare them.
+_RANGES: Final = {name: _range(name) for name in ("lat", "lon", "speed")}
 _MAX_EPOCH_S: Final = 1e11  # larger numbers are epoch ms or finer (see the module docstring)
 
 
@@ -267,18 +281,17 @@ def read_fix(
     time_s = _time(given["time"], why)
     lat = _number(given.get("lat"), "lat", why, required=True)
     lon = _number(given.get("lon"), "lon", why, required=True)
-    if not -90.0 <= lat <= 90.0:
-        why.refuse(
-            "lat",
-            f"lat is {lat:g}, out of range [-90, 90]",
-            "give WGS84 degrees (swapped lon/lat?)",
-        )
-    if not -180.0 <= lon <= 180.0:
-        why.refuse("lon", f"lon is {lon:g}, out of range [-180, 180]", "give WGS84 degrees")
+    for name, value, hint in (
+        ("lat", lat, "give WGS84 degrees (swapped lon/lat?)"),
+        ("lon", lon, "give WGS84 degrees"),
+    ):
+        low, high = _RANGES[name]
+        if not low <= value <= high:
+            why.refuse(name, f"{name} is {value:g}, out of range [{low:g}, {high:g}]", hint)
     heading = _number(given.get("heading"), "heading", why, required=False)
     heading = heading % 360.0 if math.isfinite(heading) else math.nan
     speed = _number(given.get("speed"), "speed", why, required=False)
-    if speed < 0 or speed == math.inf:
+    if speed < _RANGES["speed"][0] or speed == math.inf:
         why.refuse("speed", f"speed is {speed:g} m/s", "it must be >= 0; leave it out if unknown")
     accuracy = _positive(given.get("accuracy"), "accuracy", "m", why)
     hdop = _positive(given.get("hdop"), "hdop", "", why)
