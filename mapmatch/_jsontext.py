@@ -1,4 +1,4 @@
-"""
+r"""
 JSON objects of many rows at once, from arrays: as text, or as Python objects.
 
 :mod:`mapmatch.export` declares each kind of feature once, as a :class:`Table` of named
@@ -6,11 +6,23 @@ columns, and renders it as JSON text (:meth:`Table.text`) or as dicts
 (:meth:`Table.objects`); both show the same values, so ``json.loads(table.text())`` equals
 ``table.objects()``.
 
-The text is made column by column (the floats' digits by a compiled kernel, ``str`` of the
-ints) and row by row with one ``%`` template for the whole object, so no dict, no JSON
-encoder and no numpy scalar is touched per value. Numbers come out as ``json.dumps`` writes
-them (``repr``); values that are not finite, and rows outside a column's ``valid`` mask,
-are ``null``.
+The text of a whole table is written by one compiled call (:func:`_write_rows`), from a
+small program made once per set of columns (literals, numbers, nested objects and arrays
+inlined) and the columns' arrays, so no dict, no JSON encoder and no Python object is
+touched per value. Numbers come out as ``json.dumps`` writes them (``repr``); values that
+are not finite, and rows outside a column's ``valid`` mask, are ``null``.
+
+Examples
+--------
+>>> points = Table(2, [("kind", Const("point")), ("n", Ints(np.array([7, -1]))),
+...     ("at", Tuple((Floats(np.array([1.23456789, np.nan]), rounding="numpy"),),
+...                  np.array([True, False]))),
+...     ("name", Strings(["Main St", None]))])
+>>> print(points.text().replace("},{", "},\n{"))
+{"kind":"point","n":7,"at":[1.2345679],"name":"Main St"},
+{"kind":"point","n":-1,"at":null,"name":null}
+>>> json.loads("[" + points.text() + "]") == points.objects()
+True
 """
 
 from __future__ import annotations
@@ -18,7 +30,8 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Protocol
+from itertools import pairwise
+from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
 from numba import njit
@@ -129,102 +142,435 @@ class Ints:
 
 #: ``n`` below this has at most 15 significant digits: its decimal reads back unambiguously.
 _MAX_EXACT = 1e15
+#: ``10.0**k``, for the kernels (``decimals`` up to 22, where every power is exact).
+_POW10 = 10.0 ** np.arange(23)
+_ROUNDING = {"none": 0, "numpy": 1, "python": 2}
+#: What a row of the text is made of: the codes of :func:`_write_rows`' program.
+_LIT, _FLOAT, _INT, _BOOL, _TEXT, _GROUP = 0, 1, 2, 3, 4, 5
 
 
 @njit(cache=True, nogil=True)
-def _decimals_kernel(values, digits):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """
-    Each value's ``repr`` when it has at most ``digits`` decimals, comma-separated ASCII.
+def _put_null(out, at):  # type: ignore[no-untyped-def]  # pragma: no cover
+    out[at] = 110  # n
+    out[at + 1] = 117  # u
+    out[at + 2] = 108  # l
+    out[at + 3] = 108  # l
+    return at + 4
 
-    ``n = |v| * 10**digits`` rounded must give ``v`` back (then the decimal ``n / 10**digits``
-    with its trailing zeros dropped is the shortest text reading back as ``v``, which is what
-    ``repr`` writes) and have at most 15 digits; ``repr`` also writes ``1e-05`` below 1e-4.
-    Values that do not qualify are written as nothing and flagged for ``repr`` itself.
-    """
-    scale = 10.0**digits
-    out = np.empty(len(values) * 24, dtype=np.uint8)
-    slow = np.zeros(len(values), dtype=np.bool_)
-    digit = np.empty(20, dtype=np.uint8)
-    at = 0
-    for i in range(len(values)):
-        if i:
-            out[at] = 44  # ,
-            at += 1
-        v = values[i]
-        if not np.isfinite(v):
-            slow[i] = True
-            continue
-        a = abs(v)
-        n = np.rint(a * scale)
-        if n >= _MAX_EXACT or n / scale != a or (a != 0.0 and a < 1e-4):
-            slow[i] = True
-            continue
-        if math.copysign(1.0, v) < 0:
-            out[at] = 45  # -
-            at += 1
-        k = int(n)
-        count = 0
-        while True:  # every digit of n, least significant first
-            digit[count] = 48 + k % 10
-            k //= 10
-            count += 1
-            if k == 0 and count > digits:
-                break
-        for j in range(count - 1, digits - 1, -1):  # the whole part
-            out[at] = digit[j]
-            at += 1
-        out[at] = 46  # .
+
+@njit(cache=True, nogil=True)
+def _put_int(out, at, k, digit):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """The decimal digits of the int64 ``k`` at ``out[at:]``; returns the end."""
+    ten = np.uint64(10)
+    if k < 0:
+        out[at] = 45  # -
         at += 1
-        if digits == 0:
-            out[at] = 48  # 0
+        u = np.uint64(-(k + 1)) + np.uint64(1)
+    else:
+        u = np.uint64(k)
+    count = 0
+    while True:
+        digit[count] = u % ten + np.uint64(48)
+        u //= ten
+        count += 1
+        if u == 0:
+            break
+    for j in range(count - 1, -1, -1):
+        out[at] = digit[j]
+        at += 1
+    return at
+
+
+@njit(cache=True, nogil=True)
+def _put_float(out, at, v, digits, rounding, pow10, digit):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    Write ``repr`` of the finite ``v`` (rounded first) at ``out[at:]``; return the end.
+
+    -1 if ``repr`` itself must write it.
+    ``rounding`` 1 is numpy's (``rint(v * 10**digits) / 10**digits``), 2 Python's
+    ``round`` (:func:`py_round`: numpy's unless the product is within rounding error of a
+    half, then -1). Then ``n = |v| * 10**digits`` rounded must give ``v`` back (then the
+    decimal ``n / 10**digits`` with its trailing zeros dropped is the shortest text reading
+    back as ``v``, which is what ``repr`` writes) and have at most 15 digits; ``repr`` also
+    writes ``1e-05`` below 1e-4.
+    """
+    scale = pow10[digits]
+    if rounding:
+        y = v * scale
+        if not np.isfinite(y):
+            return -1
+        if rounding == 2:
+            ay = abs(y)
+            if ay >= 2.0**52 or abs(abs(y - np.trunc(y)) - 0.5) <= 1e-9 + 8.0 * _EPS * ay:
+                return -1
+        v = np.rint(y) / scale
+    a = abs(v)
+    n = np.rint(a * scale)
+    if n >= _MAX_EXACT or n / scale != a or (a != 0.0 and a < 1e-4):
+        return -1
+    if math.copysign(1.0, v) < 0:
+        out[at] = 45  # -
+        at += 1
+    k = int(n)
+    count = 0
+    while True:  # every digit of n, least significant first
+        digit[count] = 48 + k % 10
+        k //= 10
+        count += 1
+        if k == 0 and count > digits:
+            break
+    for j in range(count - 1, digits - 1, -1):  # the whole part
+        out[at] = digit[j]
+        at += 1
+    out[at] = 46  # .
+    at += 1
+    if digits == 0:
+        out[at] = 48  # 0
+        return at + 1
+    last = digits - 1  # the fraction, trailing zeros dropped, at least one digit
+    for j in range(digits - 1):
+        if digit[j] != 48:
+            last = j
+            break
+    for j in range(digits - 1, last - 1, -1):
+        out[at] = digit[j]
+        at += 1
+    return at
+
+
+@njit(cache=True, nogil=True)
+def _write_rows(  # type: ignore[no-untyped-def]  # pragma: no cover
+    rows, sep, ops, lit, lit_at, floats, ints, masks, text, text_at, pow10
+):
+    """
+    Every row's text, by the program ``ops`` (one ``(code, a, b, c)`` per step), ASCII.
+
+    ``_LIT``: the literal ``lit[lit_at[a]:lit_at[a + 1]]``; ``_FLOAT``: ``floats[a]``,
+    ``null`` if not finite or not ``masks[b]`` (``b >= 0``), ``c`` is ``decimals * 4 +
+    rounding``; ``_INT`` / ``_BOOL``: ``ints[a]`` as digits (``null`` outside ``masks[b]``)
+    / ``true`` or ``false``; ``_TEXT``: the row's bytes of ``text`` between ``text_at[a]``;
+    ``_GROUP``: ``null`` instead of the next ``b`` steps outside ``masks[a]``. Rows are
+    separated by the byte ``sep`` (none if negative).
+
+    Returns the text, where each row starts (and the end), and ``(position, step, row)``
+    of each number left for ``repr`` (written as nothing).
+    """
+    n_ops = ops.shape[0]
+    per_row = 1
+    n_floats = 0
+    for k in range(n_ops):
+        code = ops[k, 0]
+        if code == 0:
+            per_row += lit_at[ops[k, 1] + 1] - lit_at[ops[k, 1]]
+        elif code == 1:
+            per_row += 28
+            n_floats += 1
+        elif code == 2:
+            per_row += 21
+        else:
+            per_row += 5
+    out = np.empty(rows * per_row + len(text), dtype=np.uint8)
+    row_at = np.empty(rows + 1, dtype=np.int64)
+    slow = np.empty((rows * n_floats, 3), dtype=np.int64)
+    digit = np.empty(24, dtype=np.uint8)
+    at = 0
+    n_slow = 0
+    for r in range(rows):
+        if r and sep >= 0:
+            out[at] = sep
             at += 1
-            continue
-        last = digits - 1  # the fraction, trailing zeros dropped, at least one digit
-        for j in range(digits - 1):
-            if digit[j] != 48:
-                last = j
-                break
-        for j in range(digits - 1, last - 1, -1):
-            out[at] = digit[j]
-            at += 1
-    return out[:at], slow
+        row_at[r] = at
+        k = 0
+        while k < n_ops:
+            code = ops[k, 0]
+            a = ops[k, 1]
+            b = ops[k, 2]
+            if code == 0:
+                for j in range(lit_at[a], lit_at[a + 1]):
+                    out[at] = lit[j]
+                    at += 1
+            elif code == 1:
+                v = floats[a, r]
+                if (b >= 0 and not masks[b, r]) or not np.isfinite(v):
+                    at = _put_null(out, at)
+                else:
+                    end = _put_float(out, at, v, ops[k, 3] >> 2, ops[k, 3] & 3, pow10, digit)
+                    if end < 0:
+                        slow[n_slow, 0] = at
+                        slow[n_slow, 1] = k
+                        slow[n_slow, 2] = r
+                        n_slow += 1
+                    else:
+                        at = end
+            elif code == 2:
+                if b >= 0 and not masks[b, r]:
+                    at = _put_null(out, at)
+                else:
+                    at = _put_int(out, at, ints[a, r], digit)
+            elif code == 3:
+                if ints[a, r]:
+                    out[at] = 116  # t
+                    out[at + 1] = 114  # r
+                    out[at + 2] = 117  # u
+                    out[at + 3] = 101  # e
+                    at += 4
+                else:
+                    out[at] = 102  # f
+                    out[at + 1] = 97  # a
+                    out[at + 2] = 108  # l
+                    out[at + 3] = 115  # s
+                    out[at + 4] = 101  # e
+                    at += 5
+            elif code == 4:
+                for j in range(text_at[a, r], text_at[a, r + 1]):
+                    out[at] = text[j]
+                    at += 1
+            elif not masks[a, r]:  # a group outside its mask
+                at = _put_null(out, at)
+                k += b
+            k += 1
+    row_at[rows] = at
+    return out[:at], row_at, slow[:n_slow]
+
+
+class _Writer:
+    """
+    A program for :func:`_write_rows` and the arrays it reads, made by walking the columns.
+
+    Literals next to each other are merged; a column this module does not know is written
+    from its :meth:`Column.cells`.
+    """
+
+    __slots__ = ("_mask_at", "_open", "floats", "ints", "masks", "ops", "rows", "texts")
+
+    def __init__(self, rows: int) -> None:
+        self.rows = rows
+        self.ops: list[tuple[int, Any, int, int]] = []
+        self.floats: list[FloatArray] = []
+        self.ints: list[Any] = []
+        self.masks: list[BoolArray] = []
+        self.texts: list[list[str]] = []
+        self._mask_at: dict[int, int] = {}
+        self._open = False
+
+    def lit(self, text: str) -> None:
+        """Write ``text`` in every row."""
+        if self._open:
+            self.ops[-1] = (_LIT, self.ops[-1][1] + text, 0, 0)
+        else:
+            self.ops.append((_LIT, text, 0, 0))
+            self._open = True
+
+    def _step(self, code: int, a: int, b: int = -1, c: int = 0) -> None:
+        self.ops.append((code, a, b, c))
+        self._open = False
+
+    def _mask(self, valid: BoolArray | None) -> int:
+        if valid is None:
+            return -1
+        at = self._mask_at.get(id(valid))
+        if at is None:
+            at = self._mask_at[id(valid)] = len(self.masks)
+            self.masks.append(valid)
+        return at
+
+    def column(self, column: Column) -> None:
+        """Write each row's value of ``column``."""
+        if isinstance(column, Floats):
+            if not 0 <= column.decimals < len(_POW10):
+                msg = f"decimals={column.decimals}: use 0 to {len(_POW10) - 1}"
+                raise ValueError(msg)
+            code = column.decimals * 4 + _ROUNDING[column.rounding]
+            self._step(_FLOAT, len(self.floats), self._mask(column.valid), code)
+            self.floats.append(column.values)
+        elif isinstance(column, Ints):
+            self._step(_INT, len(self.ints), self._mask(column.valid))
+            self.ints.append(column.values)
+        elif isinstance(column, Bools):
+            self._step(_BOOL, len(self.ints))
+            self.ints.append(column.values)
+        elif isinstance(column, Const):
+            self.lit(json.dumps(column.value))
+        elif isinstance(column, Tuple):
+            column.write(self)
+        elif isinstance(column, Nested) and column.table.rows == self.rows:
+            column.table.write(self)
+        else:
+            self._step(_TEXT, len(self.texts))
+            self.texts.append(column.cells(self.rows))
+
+    def group(self, valid: BoolArray | None) -> int:
+        """Open a part written as ``null`` outside ``valid``; close it with :meth:`close`."""
+        if valid is None:
+            return -1
+        self._step(_GROUP, self._mask(valid))
+        return len(self.ops) - 1
+
+    def close(self, group: int) -> None:
+        """Close the part :meth:`group` opened."""
+        if group >= 0:
+            self.ops[group] = (_GROUP, self.ops[group][1], len(self.ops) - group - 1, 0)
+            self._open = False
+
+    def run(self, sep: int) -> tuple[bytes, list[int], list[tuple[int, int, str]]]:
+        """
+        Write the rows.
+
+        Returns the rows' text (separated by the byte ``sep``, none if negative), where each
+        row starts, and the ``(position, row, text)`` of each number ``repr`` writes instead.
+        """
+        ops, lit, lit_at = _program(tuple(self.ops))
+        rows = self.rows
+        floats = np.empty((len(self.floats), rows), dtype=np.float64)
+        for i, f in enumerate(self.floats):
+            floats[i] = f
+        ints = np.empty((len(self.ints), rows), dtype=np.int64)
+        for i, v in enumerate(self.ints):
+            ints[i] = v
+        masks = np.empty((len(self.masks), rows), dtype=np.bool_)
+        for i, m in enumerate(self.masks):
+            masks[i] = m
+        text, text_at = self._text()
+        out, row_at, slow = _write_rows(
+            rows, sep, ops, lit, lit_at, floats, ints, masks, text, text_at, _POW10
+        )
+        fixes = [(at, r, self._repr(floats, k, r)) for at, k, r in slow.tolist()]
+        return out.tobytes(), row_at.tolist(), fixes
+
+    def _repr(self, floats: FloatArray, step: int, row: int) -> str:
+        """What ``repr`` writes for the number of ``step`` in ``row`` (rounded first)."""
+        _, a, _, c = self.ops[step]
+        digits, rounding = divmod(c, 4)
+        value = floats[a, row : row + 1]
+        if rounding == _ROUNDING["python"]:
+            value = py_round(value, digits)
+        elif rounding == _ROUNDING["numpy"]:
+            value = np.round(value, digits)
+        number = float(value[0])
+        return repr(number) if math.isfinite(number) else _NULL
+
+    def _text(self) -> tuple[Any, IntArray]:
+        """The cells of the text columns as one ASCII buffer, and where each one starts."""
+        text_at = np.zeros((len(self.texts), self.rows + 1), dtype=np.int64)
+        if not self.texts:
+            return np.zeros(0, dtype=np.uint8), text_at
+        joined = []
+        base = 0
+        for i, cells in enumerate(self.texts):
+            if len(cells) != self.rows:
+                msg = f"a column has {len(cells)} cells for {self.rows} rows"
+                raise ValueError(msg)
+            text_at[i, 0] = base
+            np.cumsum(list(map(len, cells)), out=text_at[i, 1:])
+            text_at[i, 1:] += base
+            joined.append("".join(cells))
+            base = int(text_at[i, -1])
+        data = bytearray("".join(joined).encode("ascii"))
+        return np.frombuffer(data, dtype=np.uint8), text_at
+
+
+_PROGRAMS: dict[tuple[tuple[int, Any, int, int], ...], tuple[IntArray, Any, IntArray]] = {}
+
+
+def _program(steps: tuple[tuple[int, Any, int, int], ...]) -> tuple[IntArray, Any, IntArray]:
+    """``steps`` as the arrays :func:`_write_rows` reads, made once per program."""
+    program = _PROGRAMS.get(steps)
+    if program is None:
+        literals = [s[1] for s in steps if s[0] == _LIT]
+        ops = np.array(
+            [(code, a, b, c) for code, a, b, c in _numbered(steps)], dtype=np.int64
+        ).reshape(-1, 4)
+        lit = np.frombuffer(bytearray("".join(literals).encode("ascii")), dtype=np.uint8)
+        lit_at = np.concatenate(([0], np.cumsum([len(t) for t in literals]))).astype(np.int64)
+        if len(_PROGRAMS) >= 256:  # the tables' shapes are few; never grow without bound
+            _PROGRAMS.clear()
+        program = _PROGRAMS[steps] = (ops, lit, lit_at)
+    return program
+
+
+def _numbered(steps: Sequence[tuple[int, Any, int, int]]) -> list[tuple[int, int, int, int]]:
+    """The steps with each literal replaced by its number."""
+    out = []
+    n = 0
+    for code, a, b, c in steps:
+        if code == _LIT:
+            out.append((code, n, b, c))
+            n += 1
+        else:
+            out.append((code, a, b, c))
+    return out
+
+
+def _joined(column: Column, rows: int) -> str:
+    """The rows' values of ``column`` as JSON text joined by commas."""
+    writer = _Writer(rows)
+    writer.column(column)
+    text, _, fixes = writer.run(ord(","))
+    return _spliced(text, fixes, 0).decode("ascii")
+
+
+def _each(write: Any, rows: int) -> list[str]:
+    """Each row's JSON text of what ``write`` writes into a :class:`_Writer`."""
+    writer = _Writer(rows)
+    write(writer)
+    text, row_at, fixes = writer.run(-1)
+    by_row: dict[int, list[tuple[int, int, str]]] = {}
+    for fix in fixes:
+        by_row.setdefault(fix[1], []).append(fix)
+    cells = [text[a:b] for a, b in pairwise(row_at)]
+    for r, row_fixes in by_row.items():
+        cells[r] = _spliced(cells[r], row_fixes, row_at[r])
+    return [cell.decode("ascii") for cell in cells]
+
+
+def _spliced(text: bytes, fixes: list[tuple[int, int, str]], start: int) -> bytes:
+    """``text`` (which starts at ``start``) with each fix's text inserted at its position."""
+    if not fixes:
+        return text
+    parts: list[bytes] = []
+    done = 0
+    for at, _, fix in fixes:
+        parts += (text[done : at - start], fix.encode("ascii"))
+        done = at - start
+    parts.append(text[done:])
+    return b"".join(parts)
 
 
 @dataclass(frozen=True, slots=True)
 class Floats:
     """
-    Real numbers as ``repr`` writes them (round them first); ``null`` if not finite or valid.
+    Real numbers as ``repr`` writes them; ``null`` if not finite or not valid.
 
-    ``decimals`` is how many the values carry: those are written by a compiled kernel, any
-    other by ``repr`` itself (the same text, slower).
+    ``rounding`` rounds them to ``decimals`` first: ``"numpy"`` as ``numpy.round`` does,
+    ``"python"`` as Python's ``round`` (:func:`py_round`); ``"none"`` writes them as they
+    are, which is fastest when they carry at most ``decimals`` decimals (written by a
+    compiled kernel; any other value by ``repr`` itself, the same text, slower).
     """
 
     values: FloatArray
     valid: BoolArray | None = None
     decimals: int = 7
+    rounding: Literal["none", "numpy", "python"] = "none"
 
-    def _missing(self) -> BoolArray | None:
-        missing = ~np.isfinite(self.values)
-        if self.valid is not None:
-            missing |= ~self.valid
-        return missing if missing.any() else None
+    def _rounded(self) -> FloatArray:
+        values = np.asarray(self.values, dtype=np.float64)
+        if self.rounding == "python":
+            return py_round(values, self.decimals)
+        if self.rounding == "numpy":
+            return np.asarray(np.round(values, self.decimals), dtype=np.float64)
+        return values
 
     def cells(self, rows: int) -> list[str]:
-        """``repr`` of each number."""
-        values = np.ascontiguousarray(self.values, dtype=np.float64)
-        if len(values) == 0:
-            return []
-        text, slow = _decimals_kernel(values, self.decimals)
-        cells = text.tobytes().decode("ascii").split(",")
-        if slow.any():
-            for i in np.flatnonzero(slow).tolist():
-                cells[i] = repr(float(values[i]))
-        return _nulls(cells, self._missing())
+        """``repr`` of each number (rounded)."""
+        return _each(lambda w: w.column(self), rows)
 
     def objects(self, rows: int) -> list[Any]:
-        """Python floats, ``None`` where missing."""
-        values: list[Any] = np.asarray(self.values, dtype=np.float64).tolist()
-        return _nulls(values, self._missing(), None)
+        """Python floats (rounded), ``None`` where missing."""
+        values = self._rounded()
+        missing = ~np.isfinite(values)
+        if self.valid is not None:
+            missing |= ~self.valid
+        return _nulls(values.tolist(), missing, None)
 
 
 @dataclass(frozen=True, slots=True)
@@ -244,6 +590,19 @@ class Bools:
         return flags
 
 
+def _quoted(value: str | None) -> str:
+    """``json.dumps(value)``; plain printable ASCII without quotes or backslashes directly."""
+    if (
+        value is not None
+        and value.isascii()
+        and value.isprintable()
+        and '"' not in value
+        and "\\" not in value
+    ):
+        return f'"{value}"'
+    return json.dumps(value)
+
+
 @dataclass(frozen=True, slots=True)
 class Strings:
     """Texts (escaped as ``json.dumps`` does, ASCII); ``null`` for ``None``."""
@@ -252,7 +611,7 @@ class Strings:
 
     def cells(self, rows: int) -> list[str]:
         """The quoted strings."""
-        return list(map(json.dumps, self.values))
+        return list(map(_quoted, self.values))
 
     def objects(self, rows: int) -> list[Any]:
         """The strings."""
@@ -272,19 +631,23 @@ class Tuple:
     valid: BoolArray | None = None
     geometry: str | None = None
 
-    def _missing(self) -> BoolArray | None:
-        return None if self.valid is None else ~self.valid
+    def write(self, writer: _Writer) -> None:
+        """Write each row's array."""
+        group = writer.group(self.valid)
+        if self.geometry is None:
+            writer.lit("[")
+        else:
+            writer.lit(f'{{"type":{json.dumps(self.geometry)},"coordinates":[')
+        for i, item in enumerate(self.items):
+            if i:
+                writer.lit(",")
+            writer.column(item)
+        writer.lit("]" if self.geometry is None else "]}")
+        writer.close(group)
 
     def cells(self, rows: int) -> list[str]:
         """The arrays' text."""
-        inner = ",".join(["%s"] * len(self.items))
-        if self.geometry is None:
-            template = f"[{inner}]"
-        else:
-            template = f'{{"type":{json.dumps(self.geometry)},"coordinates":[{inner}]}}'
-        columns = [c.cells(rows) for c in self.items]
-        text = list(map(template.__mod__, zip(*columns, strict=True)))
-        return _nulls(text, self._missing())
+        return _each(self.write, rows)
 
     def objects(self, rows: int) -> list[Any]:
         """Lists (or geometry dicts), ``None`` outside ``valid``."""
@@ -293,7 +656,7 @@ class Tuple:
         )
         if self.geometry is not None:
             arrays = [{"type": self.geometry, "coordinates": a} for a in arrays]
-        return _nulls(arrays, self._missing(), None)
+        return _nulls(arrays, None if self.valid is None else ~self.valid, None)
 
 
 @dataclass(frozen=True, slots=True)
@@ -330,7 +693,7 @@ class Values:
 
     def text(self) -> str:
         """The values' text joined by commas."""
-        return ",".join(self.column.cells(self.rows))
+        return _joined(self.column, self.rows)
 
     def objects(self) -> list[Any]:
         """The values as Python objects."""
@@ -369,6 +732,9 @@ class Table:
     """
     Rows of JSON objects with the same members: ``{name: value, ...}`` per row.
 
+    The text is written by one compiled call for the whole table (nested objects and
+    arrays of the same rows inlined), from a program made once per set of columns.
+
     Parameters
     ----------
     rows
@@ -380,39 +746,29 @@ class Table:
     rows: int
     columns: Sequence[tuple[str, Column]]
 
-    def _template(self) -> tuple[str, list[Column]]:
-        """
-        One row's ``%`` template and the columns that fill it, in order.
-
-        Constant members are written into the template and nested objects inlined, so a
-        row is one ``%`` operation however deep it is.
-        """
-        parts: list[str] = []
-        columns: list[Column] = []
-        for name, column in self.columns:
-            key = json.dumps(name).replace("%", "%%")
-            if isinstance(column, Const):
-                parts.append(f"{key}:{column.cells(1)[0].replace('%', '%%')}")
-            elif isinstance(column, Nested) and column.table.rows == self.rows:
-                inner, more = column.table._template()
-                parts.append(f"{key}:{inner}")
-                columns += more
-            else:
-                parts.append(f"{key}:%s")
-                columns.append(column)
-        return "{" + ",".join(parts) + "}", columns
+    def write(self, writer: _Writer) -> None:
+        """Write each row's object."""
+        for i, (name, column) in enumerate(self.columns):
+            writer.lit(("{" if i == 0 else ",") + _quoted(name) + ":")
+            writer.column(column)
+        writer.lit("}" if self.columns else "{}")
 
     def rows_text(self) -> list[str]:
         """Each row's object as JSON text."""
-        template, columns = self._template()
-        cells = [column.cells(self.rows) for column in columns]
-        if not cells:
-            return [template.replace("%%", "%")] * self.rows
-        return list(map(template.__mod__, zip(*cells, strict=True)))
+        return _each(self.write, self.rows)
+
+    def ascii(self) -> bytes:
+        """The rows' objects as JSON text joined by commas (no brackets around them)."""
+        if self.rows == 0:
+            return b""
+        writer = _Writer(self.rows)
+        self.write(writer)
+        text, _, fixes = writer.run(ord(","))
+        return _spliced(text, fixes, 0)
 
     def text(self) -> str:
-        """The rows' objects as JSON text joined by commas (no brackets around them)."""
-        return ",".join(self.rows_text())
+        """:meth:`ascii` as a string."""
+        return self.ascii().decode("ascii")
 
     def objects(self) -> list[Any]:
         """The rows' objects as dicts."""

@@ -39,7 +39,6 @@ from mapmatch._jsontext import (
     Table,
     Tuple,
     Values,
-    py_round,
 )
 from mapmatch._timing import PathPositions, edge_times, path_positions
 
@@ -236,12 +235,12 @@ def _point_table(result: MatchResult, positions: PathPositions) -> Table:
 
 def _rounded(values: FloatArray, digits: int) -> Floats:
     """Values rounded as Python's ``round(value, digits)`` does, written as ``repr`` does."""
-    return Floats(py_round(values, digits), decimals=digits)
+    return Floats(values, decimals=digits, rounding="python")
 
 
 def _coordinates(degrees: FloatArray) -> Floats:
-    rounded: FloatArray = np.round(degrees, COORD_DIGITS)
-    return Floats(rounded)
+    """Degrees rounded as ``numpy.round(degrees, COORD_DIGITS)`` does."""
+    return Floats(degrees, decimals=COORD_DIGITS, rounding="numpy")
 
 
 def _edge_json(edges: EdgeTable, part: slice) -> Table:
@@ -360,8 +359,8 @@ def geojson_bytes(result: MatchResult) -> bytes:
         points).
     """
     head = json.dumps(_head(result), allow_nan=False, separators=(",", ":"))
-    parts = [t.text() for t in _feature_tables(result) if t.rows]
-    return f'{head[:-1]},"features":[{",".join(parts)}]}}'.encode("ascii")
+    parts = [t.ascii() for t in _feature_tables(result) if t.rows]
+    return b"".join((head[:-1].encode("ascii"), b',"features":[', b",".join(parts), b"]}"))
 
 
 def geojson_dict(result: MatchResult) -> dict[str, Any]:
