@@ -211,31 +211,39 @@ def _put_float(out, at, v, digits, rounding, pow10, digit):  # type: ignore[no-u
     if math.copysign(1.0, v) < 0:
         out[at] = 45  # -
         at += 1
-    k = int(n)
-    count = 0
-    while True:  # every digit of n, least significant first
-        digit[count] = 48 + k % 10
-        k //= 10
-        count += 1
-        if k == 0 and count > digits:
-            break
-    for j in range(count - 1, digits - 1, -1):  # the whole part
-        out[at] = digit[j]
-        at += 1
-    out[at] = 46  # .
-    at += 1
+    ten = np.uint64(10)
+    k = np.uint64(n)
+    kept = digits  # decimals written: trailing zeros dropped, at least one
     if digits == 0:
-        out[at] = 48  # 0
-        return at + 1
-    last = digits - 1  # the fraction, trailing zeros dropped, at least one digit
-    for j in range(digits - 1):
-        if digit[j] != 48:
-            last = j
-            break
-    for j in range(digits - 1, last - 1, -1):
-        out[at] = digit[j]
-        at += 1
-    return at
+        kept = 1
+    else:
+        while kept > 1 and k % ten == 0:
+            k //= ten
+            kept -= 1
+    size = 1  # digits of k, at least one more than the decimals (a whole part)
+    rest = k // ten
+    while rest:
+        size += 1
+        rest //= ten
+    if digits == 0:
+        size += 1  # the 0 after the point
+    elif size <= kept:
+        size = kept + 1
+    end = at + size + 1
+    j = end - 1
+    if digits == 0:
+        out[j] = 48  # 0
+        j -= 1
+        out[j] = 46  # .
+        j -= 1
+    for written in range(size - (1 if digits == 0 else 0)):  # least significant first
+        if digits and written == kept:
+            out[j] = 46  # .
+            j -= 1
+        out[j] = k % ten + np.uint64(48)
+        k //= ten
+        j -= 1
+    return end
 
 
 @njit(cache=True, nogil=True)
@@ -603,6 +611,19 @@ def _quoted(value: str | None) -> str:
     return json.dumps(value)
 
 
+class _Quotes(dict[str | None, str]):
+    """:func:`_quoted` of the strings seen (names and classes repeat), made once each."""
+
+    def __missing__(self, value: str | None) -> str:
+        if len(self) >= 65536:
+            self.clear()
+        text = self[value] = _quoted(value)
+        return text
+
+
+_QUOTES = _Quotes()
+
+
 @dataclass(frozen=True, slots=True)
 class Strings:
     """Texts (escaped as ``json.dumps`` does, ASCII); ``null`` for ``None``."""
@@ -611,7 +632,7 @@ class Strings:
 
     def cells(self, rows: int) -> list[str]:
         """The quoted strings."""
-        return list(map(_quoted, self.values))
+        return list(map(_QUOTES.__getitem__, self.values))
 
     def objects(self, rows: int) -> list[Any]:
         """The strings."""
@@ -749,7 +770,7 @@ class Table:
     def write(self, writer: _Writer) -> None:
         """Write each row's object."""
         for i, (name, column) in enumerate(self.columns):
-            writer.lit(("{" if i == 0 else ",") + _quoted(name) + ":")
+            writer.lit(("{" if i == 0 else ",") + _QUOTES[name] + ":")
             writer.column(column)
         writer.lit("}" if self.columns else "{}")
 
