@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numba import njit
 
 if TYPE_CHECKING:
     from mapmatch.result import MatchResult, Segment
@@ -113,43 +114,87 @@ def path_positions(result: MatchResult) -> PathPositions:
     return PathPositions(edge_index=edge_index, along_m=along)
 
 
-def _time_at(along: FloatArray, time_s: FloatArray, at_m: FloatArray) -> FloatArray:
+@njit(cache=True, nogil=True)
+def _time_at(along, time_s, at_m):  # type: ignore[no-untyped-def]  # pragma: no cover
     """When the car left each distance ``at_m``: linear between the fixes around it."""
     last = len(along) - 1
-    i = np.searchsorted(along, at_m, side="right") - 1  # last fix at or before the place
-    i0 = np.clip(i, 0, last)
-    i1 = np.clip(i + 1, 0, last)
-    span = along[i1] - along[i0]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        frac = np.where(span > 0, (at_m - along[i0]) / span, 0.0)
-    t = time_s[i0] + np.clip(frac, 0.0, 1.0) * (time_s[i1] - time_s[i0])
-    t = np.where(i < 0, time_s[0], t)
-    return np.asarray(np.where(i >= last, time_s[last], t), dtype=np.float64)
+    out = np.empty(len(at_m))
+    for j in range(len(at_m)):
+        x = at_m[j]
+        lo, hi = 0, len(along)  # the first fix past the place
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if along[mid] <= x:
+                lo = mid + 1
+            else:
+                hi = mid
+        i = lo - 1  # last fix at or before the place
+        if i < 0:
+            out[j] = time_s[0]
+            continue
+        if i >= last:
+            out[j] = time_s[last]
+            continue
+        span = along[i + 1] - along[i]
+        frac = (x - along[i]) / span if span > 0 else 0.0
+        frac = min(max(frac, 0.0), 1.0)
+        out[j] = time_s[i] + frac * (time_s[i + 1] - time_s[i])
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _segment_times(  # type: ignore[no-untyped-def]  # pragma: no cover
+    segment, point_segment, matched, time_s, along_m, driven
+):
+    """Where ``segment``'s edges start and end along its path, and their entry and exit times."""
+    m = len(driven)
+    end = np.empty(m)
+    total = 0.0
+    for j in range(m):
+        total += driven[j]
+        end[j] = total
+    start = end - driven
+    entry = np.full(m, np.nan)
+    exit_ = np.full(m, np.nan)
+    keep = (point_segment == segment) & matched & np.isfinite(time_s) & np.isfinite(along_m)
+    fixes = np.flatnonzero(keep)
+    if len(fixes) and m:
+        raw = along_m[fixes]
+        times = time_s[fixes]
+        # monotone in time: the mean of the running maximum and the running minimum
+        # from the end, so one fix scattered forward during a stop does not move the
+        # whole stop past an edge's end (nor one scattered back hold it before)
+        n = len(raw)
+        forward = np.empty(n)
+        backward = np.empty(n)
+        high = raw[0]
+        for k in range(n):
+            high = max(high, raw[k])
+            forward[k] = high
+        low = raw[n - 1]
+        for k in range(n - 1, -1, -1):
+            low = min(low, raw[k])
+            backward[k] = low
+        along = 0.5 * (forward + backward)
+        entry = _time_at(along, times, start)
+        exit_ = _time_at(along, times, end)
+        entry[0] = times[0]
+        exit_[-1] = times[-1]
+    return start, end, entry, exit_
 
 
 def edge_times(result: MatchResult, positions: PathPositions) -> list[EdgeTimes]:
     """Entry and exit time of every edge of every segment (see the module docstring)."""
     p = result.points
+    matched = np.asarray(p.matched, dtype=np.bool_)
+    segment = np.asarray(p.segment, dtype=np.int64)
+    time_s = np.asarray(p.time_s, dtype=np.float64)
+    along = np.asarray(positions.along_m, dtype=np.float64)
     out = []
     for seg in result.segments:
-        driven = seg.driven_m
-        end = np.cumsum(driven)
-        start = end - driven
-        entry = np.full(len(driven), np.nan)
-        exit_ = np.full(len(driven), np.nan)
-        fixes = _fixes_of(result, seg)
-        fixes = fixes[np.isfinite(p.time_s[fixes]) & np.isfinite(positions.along_m[fixes])]
-        if len(fixes) and len(driven):
-            raw = positions.along_m[fixes]
-            # monotone in time: the mean of the running maximum and the running minimum
-            # from the end, so one fix scattered forward during a stop does not move the
-            # whole stop past an edge's end (nor one scattered back hold it before)
-            forward = np.maximum.accumulate(raw)
-            along = 0.5 * (forward + np.minimum.accumulate(raw[::-1])[::-1])
-            times = p.time_s[fixes]
-            entry = _time_at(along, times, start)
-            exit_ = _time_at(along, times, end)
-            entry[0] = times[0]
-            exit_[-1] = times[-1]
+        driven = np.asarray(seg.driven_m, dtype=np.float64)
+        start, end, entry, exit_ = _segment_times(
+            seg.index, segment, matched, time_s, along, driven
+        )
         out.append(EdgeTimes(start_m=start, end_m=end, entry_s=entry, exit_s=exit_))
     return out
