@@ -30,7 +30,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
-from itertools import pairwise
+from itertools import accumulate, pairwise
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
@@ -158,31 +158,55 @@ def _put_null(out, at):  # type: ignore[no-untyped-def]  # pragma: no cover
     return at + 4
 
 
+#: The two ASCII digits of 0 to 99, for writing two digits per division.
+_PAIRS = np.frombuffer("".join(f"{i:02d}" for i in range(100)).encode("ascii"), dtype=np.uint8)
+
+
 @njit(cache=True, nogil=True)
-def _put_int(out, at, k, digit):  # type: ignore[no-untyped-def]  # pragma: no cover
+def _width(k):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """How many decimal digits the unsigned ``k`` has (at least one)."""
+    size = 1
+    bound = np.uint64(10)
+    while size < 20 and k >= bound:
+        size += 1
+        if size < 20:
+            bound *= np.uint64(10)
+    return size
+
+
+@njit(cache=True, nogil=True)
+def _put_digits(out, end, k, width):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """The last ``width`` decimal digits of the unsigned ``k`` (zero-padded) before ``end``."""
+    hundred = np.uint64(100)
+    j = end
+    while width >= 2:
+        q = k // hundred
+        r = (k - q * hundred) * np.uint64(2)
+        out[j - 1] = _PAIRS[r + np.uint64(1)]
+        out[j - 2] = _PAIRS[r]
+        j -= 2
+        width -= 2
+        k = q
+    if width:
+        out[j - 1] = k % np.uint64(10) + np.uint64(48)
+
+
+@njit(cache=True, nogil=True)
+def _put_int(out, at, k):  # type: ignore[no-untyped-def]  # pragma: no cover
     """The decimal digits of the int64 ``k`` at ``out[at:]``; returns the end."""
-    ten = np.uint64(10)
     if k < 0:
         out[at] = 45  # -
         at += 1
         u = np.uint64(-(k + 1)) + np.uint64(1)
     else:
         u = np.uint64(k)
-    count = 0
-    while True:
-        digit[count] = u % ten + np.uint64(48)
-        u //= ten
-        count += 1
-        if u == 0:
-            break
-    for j in range(count - 1, -1, -1):
-        out[at] = digit[j]
-        at += 1
-    return at
+    end = at + _width(u)
+    _put_digits(out, end, u, end - at)
+    return end
 
 
 @njit(cache=True, nogil=True)
-def _put_float(out, at, v, digits, rounding, pow10, digit):  # type: ignore[no-untyped-def]  # pragma: no cover
+def _put_float(out, at, v, digits, rounding, pow10):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
     Write ``repr`` of the finite ``v`` (rounded first) at ``out[at:]``; return the end.
 
@@ -213,37 +237,23 @@ def _put_float(out, at, v, digits, rounding, pow10, digit):  # type: ignore[no-u
         at += 1
     ten = np.uint64(10)
     k = np.uint64(n)
+    if digits == 0:
+        end = at + _width(k)
+        _put_digits(out, end, k, end - at)
+        out[end] = 46  # .
+        out[end + 1] = 48  # 0
+        return end + 2
     kept = digits  # decimals written: trailing zeros dropped, at least one
-    if digits == 0:
-        kept = 1
-    else:
-        while kept > 1 and k % ten == 0:
-            k //= ten
-            kept -= 1
-    size = 1  # digits of k, at least one more than the decimals (a whole part)
-    rest = k // ten
-    while rest:
-        size += 1
-        rest //= ten
-    if digits == 0:
-        size += 1  # the 0 after the point
-    elif size <= kept:
-        size = kept + 1
-    end = at + size + 1
-    j = end - 1
-    if digits == 0:
-        out[j] = 48  # 0
-        j -= 1
-        out[j] = 46  # .
-        j -= 1
-    for written in range(size - (1 if digits == 0 else 0)):  # least significant first
-        if digits and written == kept:
-            out[j] = 46  # .
-            j -= 1
-        out[j] = k % ten + np.uint64(48)
+    while kept > 1 and k % ten == 0:
         k //= ten
-        j -= 1
-    return end
+        kept -= 1
+    unit = np.uint64(pow10[kept])
+    whole = k // unit
+    end = at + _width(whole)
+    _put_digits(out, end, whole, end - at)
+    out[end] = 46  # .
+    _put_digits(out, end + 1 + kept, k - whole * unit, kept)
+    return end + 1 + kept
 
 
 @njit(cache=True, nogil=True)
@@ -280,7 +290,6 @@ def _write_rows(  # type: ignore[no-untyped-def]  # pragma: no cover
     out = np.empty(rows * per_row + len(text), dtype=np.uint8)
     row_at = np.empty(rows + 1, dtype=np.int64)
     slow = np.empty((rows * n_floats, 3), dtype=np.int64)
-    digit = np.empty(24, dtype=np.uint8)
     at = 0
     n_slow = 0
     for r in range(rows):
@@ -302,7 +311,7 @@ def _write_rows(  # type: ignore[no-untyped-def]  # pragma: no cover
                 if (b >= 0 and not masks[b, r]) or not np.isfinite(v):
                     at = _put_null(out, at)
                 else:
-                    end = _put_float(out, at, v, ops[k, 3] >> 2, ops[k, 3] & 3, pow10, digit)
+                    end = _put_float(out, at, v, ops[k, 3] >> 2, ops[k, 3] & 3, pow10)
                     if end < 0:
                         slow[n_slow, 0] = at
                         slow[n_slow, 1] = k
@@ -314,7 +323,7 @@ def _write_rows(  # type: ignore[no-untyped-def]  # pragma: no cover
                 if b >= 0 and not masks[b, r]:
                     at = _put_null(out, at)
                 else:
-                    at = _put_int(out, at, ints[a, r], digit)
+                    at = _put_int(out, at, ints[a, r])
             elif code == 3:
                 if ints[a, r]:
                     out[at] = 116  # t
@@ -349,7 +358,7 @@ class _Writer:
     from its :meth:`Column.cells`.
     """
 
-    __slots__ = ("_mask_at", "_open", "floats", "ints", "masks", "ops", "rows", "texts")
+    __slots__ = ("_mask_at", "_pending", "floats", "ints", "masks", "ops", "rows", "texts")
 
     def __init__(self, rows: int) -> None:
         self.rows = rows
@@ -359,19 +368,21 @@ class _Writer:
         self.masks: list[BoolArray] = []
         self.texts: list[list[str]] = []
         self._mask_at: dict[int, int] = {}
-        self._open = False
+        self._pending: list[str] = []
 
     def lit(self, text: str) -> None:
         """Write ``text`` in every row."""
-        if self._open:
-            self.ops[-1] = (_LIT, self.ops[-1][1] + text, 0, 0)
-        else:
-            self.ops.append((_LIT, text, 0, 0))
-            self._open = True
+        self._pending.append(text)
+
+    def _flush(self) -> None:
+        if self._pending:
+            self.ops.append((_LIT, "".join(self._pending), 0, 0))
+            self._pending = []
 
     def _step(self, code: int, a: int, b: int = -1, c: int = 0) -> None:
+        if self._pending:
+            self._flush()
         self.ops.append((code, a, b, c))
-        self._open = False
 
     def _mask(self, valid: BoolArray | None) -> int:
         if valid is None:
@@ -417,16 +428,17 @@ class _Writer:
     def close(self, group: int) -> None:
         """Close the part :meth:`group` opened."""
         if group >= 0:
+            self._flush()
             self.ops[group] = (_GROUP, self.ops[group][1], len(self.ops) - group - 1, 0)
-            self._open = False
 
-    def run(self, sep: int) -> tuple[bytes, list[int], list[tuple[int, int, str]]]:
+    def run(self, sep: int) -> tuple[bytes, IntArray, list[tuple[int, int, str]]]:
         """
         Write the rows.
 
         Returns the rows' text (separated by the byte ``sep``, none if negative), where each
         row starts, and the ``(position, row, text)`` of each number ``repr`` writes instead.
         """
+        self._flush()
         ops, lit, lit_at = _program(tuple(self.ops))
         rows = self.rows
         floats = np.empty((len(self.floats), rows), dtype=np.float64)
@@ -442,8 +454,10 @@ class _Writer:
         out, row_at, slow = _write_rows(
             rows, sep, ops, lit, lit_at, floats, ints, masks, text, text_at, _POW10
         )
-        fixes = [(at, r, self._repr(floats, k, r)) for at, k, r in slow.tolist()]
-        return out.tobytes(), row_at.tolist(), fixes
+        fixes = (
+            [(at, r, self._repr(floats, k, r)) for at, k, r in slow.tolist()] if len(slow) else []
+        )
+        return out.tobytes(), row_at, fixes
 
     def _repr(self, floats: FloatArray, step: int, row: int) -> str:
         """What ``repr`` writes for the number of ``step`` in ``row`` (rounded first)."""
@@ -468,11 +482,10 @@ class _Writer:
             if len(cells) != self.rows:
                 msg = f"a column has {len(cells)} cells for {self.rows} rows"
                 raise ValueError(msg)
-            text_at[i, 0] = base
-            np.cumsum(list(map(len, cells)), out=text_at[i, 1:])
-            text_at[i, 1:] += base
+            ends = list(accumulate(map(len, cells), initial=base))
+            text_at[i] = ends
             joined.append("".join(cells))
-            base = int(text_at[i, -1])
+            base = ends[-1]
         data = bytearray("".join(joined).encode("ascii"))
         return np.frombuffer(data, dtype=np.uint8), text_at
 
@@ -521,7 +534,8 @@ def _each(write: Any, rows: int) -> list[str]:
     """Each row's JSON text of what ``write`` writes into a :class:`_Writer`."""
     writer = _Writer(rows)
     write(writer)
-    text, row_at, fixes = writer.run(-1)
+    text, starts, fixes = writer.run(-1)
+    row_at = starts.tolist()
     by_row: dict[int, list[tuple[int, int, str]]] = {}
     for fix in fixes:
         by_row.setdefault(fix[1], []).append(fix)
