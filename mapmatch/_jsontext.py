@@ -176,7 +176,11 @@ def _width(k):  # type: ignore[no-untyped-def]  # pragma: no cover
 
 @njit(cache=True, nogil=True)
 def _put_digits(out, end, k, width):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """The last ``width`` decimal digits of the unsigned ``k`` (zero-padded) before ``end``."""
+    """
+    Write the last ``width`` decimal digits of the unsigned ``k`` (zero-padded) before ``end``.
+
+    Returns ``k`` without them.
+    """
     hundred = np.uint64(100)
     j = end
     while width >= 2:
@@ -189,6 +193,8 @@ def _put_digits(out, end, k, width):  # type: ignore[no-untyped-def]  # pragma: 
         k = q
     if width:
         out[j - 1] = k % np.uint64(10) + np.uint64(48)
+        k //= np.uint64(10)
+    return k
 
 
 @njit(cache=True, nogil=True)
@@ -227,10 +233,16 @@ def _put_float(out, at, v, digits, rounding, pow10):  # type: ignore[no-untyped-
             ay = abs(y)
             if ay >= 2.0**52 or abs(abs(y - np.trunc(y)) - 0.5) <= 1e-9 + 8.0 * _EPS * ay:
                 return -1
-        v = np.rint(y) / scale
-    a = abs(v)
-    n = np.rint(a * scale)
-    if n >= _MAX_EXACT or n / scale != a or (a != 0.0 and a < 1e-4):
+        whole = np.rint(y)
+        v = whole / scale
+        a = abs(v)
+        n = np.rint(a * scale)
+        back = n == abs(whole) or n / scale == a  # the first: the same division as v's
+    else:
+        a = abs(v)
+        n = np.rint(a * scale)
+        back = n / scale == a
+    if n >= _MAX_EXACT or not back or (a != 0.0 and a < 1e-4):
         return -1
     if math.copysign(1.0, v) < 0:
         out[at] = 45  # -
@@ -247,13 +259,11 @@ def _put_float(out, at, v, digits, rounding, pow10):  # type: ignore[no-untyped-
     while kept > 1 and k % ten == 0:
         k //= ten
         kept -= 1
-    unit = np.uint64(pow10[kept])
-    whole = k // unit
-    end = at + _width(whole)
-    _put_digits(out, end, whole, end - at)
-    out[end] = 46  # .
-    _put_digits(out, end + 1 + kept, k - whole * unit, kept)
-    return end + 1 + kept
+    end = at + max(_width(k) - kept, 1) + 1 + kept  # the whole part, the point, the decimals
+    whole = _put_digits(out, end, k, kept)
+    out[end - kept - 1] = 46  # .
+    _put_digits(out, end - kept - 1, whole, end - kept - 1 - at)
+    return end
 
 
 @njit(cache=True, nogil=True)
