@@ -93,7 +93,7 @@ def _assemble_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - comp
 
 @njit(cache=True, nogil=True)
 def _place(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    walked, pieces, obs, fix, post, thinning, geom, ids
+    walked, pieces, obs, fix, post, end_reach, geom, ids
 ):
     """
     The pieces' paths trimmed at their ends, and every fix placed on them.
@@ -132,11 +132,15 @@ def _place(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
         r0, r1 = row_ptr[p], row_ptr[p + 1]
         along = along_all[start:stop].copy()
         # an end fix within the observations' resolution (thinning_sigmas x sigma) of a
-        # junction cannot tell which side of it the car was: the path ends at the junction
+        # junction cannot tell which side of it the car was: the path ends at the junction;
+        # but no farther than a held car's scatter reaches (standstill_m): with sparse, noisy
+        # fixes the resolution grows to tens of metres, and cutting that much off each end of
+        # every trip is a bias of its own
+        thinning, reach_cap = end_reach
         low = np.inf
         for k in range(start, stop):
             low = min(low, o_sigma[used[k]])
-        reach = thinning * low
+        reach = min(thinning * low, reach_cap)
         if r1 - r0 > 1 and w_hi[r1 - 1] - w_lo[r1 - 1] < reach:
             cut = w_hi[r1 - 1] - w_lo[r1 - 1]
             r1 -= 1
@@ -279,7 +283,7 @@ def assemble(
         (obs.first, obs.stop, obs.of_fix, obs.stray, sigma),
         (x, y, radius, np.ascontiguousarray(outlier, np.bool_)),
         np.ascontiguousarray(chosen, f8),
-        float(config.thinning_sigmas),
+        (float(config.thinning_sigmas), float(config.standstill_m)),
         geom,
         (a.node_osm_id, a.edge_u, a.edge_v, a.edge_key),
     )

@@ -237,6 +237,18 @@ def _pair_routes(graph, ws, scratch, uturn_cost_m, table, from_edge, to_edge, bo
 
 
 @njit(cache=True, nogil=True)
+def dead_end_ahead(edge, trans_ptr, trans_to, state_edge, edge_twin):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Whether ``edge`` ends where the only way on is back along its own road (a dead end)."""
+    twin = edge_twin[edge]
+    if twin < 0:
+        return False
+    ways_on = 0  # successors other than the way back (a loop, not a generator: compiled)
+    for k in range(trans_ptr[edge], trans_ptr[edge + 1]):
+        ways_on += state_edge[trans_to[k]] != twin
+    return ways_on == 0
+
+
+@njit(cache=True, nogil=True)
 def transitions_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     graph, ws, scratch, uturn_cost_m, table, edge_speed,
     c_edge, c_off, c_dist, c_x, c_y,
@@ -284,13 +296,19 @@ def transitions_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - co
         lt[k] = transition_score(
             step_m[t], route, free, turn, dt[t], s, travel, slack, penalty[k], params
         )
-        # a U-turn in the middle of the road
+        # a U-turn in the middle of the road; at a dead end's end turning is no choice (the
+        # fixes reached the end, within a held car's scatter), so it costs what evidence does
         u = uturn_route(e2, oa[k], ob[k], edge_len[e1], edge_twin[e1])
         if np.isfinite(u):
+            cost = penalty[k]
+            short_of_end = edge_len[e1] - max(oa[k], edge_len[e1] - ob[k])
+            if short_of_end <= tolerance[k] and dead_end_ahead(
+                e1, graph[0], graph[1], graph[2], edge_twin
+            ):
+                cost = min(cost, params[P_UTURN_EVIDENCE_PENALTY])
             score = transition_score(
-                step_m[t], u, u / edge_speed[e1], True, dt[t], s, travel, slack, penalty[k], params
+                step_m[t], u, u / edge_speed[e1], True, dt[t], s, travel, slack, cost, params
             )
-            score = score + 0.0
             if score > lt[k]:
                 lt[k] = score
                 kind[k] = ROUTE_UTURN
