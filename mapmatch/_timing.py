@@ -68,29 +68,68 @@ def _stretch_of(seg: Segment, edge: IntArray, offset_m: FloatArray) -> IntArray:
     Most edges appear once in a path; for one driven twice the fixes take the first place
     at or after the previous fix's that holds their offset.
     """
-    order = np.argsort(seg.edge, kind="stable")
-    ranked = seg.edge[order]
+    place: IntArray = _places(
+        np.asarray(seg.edge, dtype=np.int64),
+        np.asarray(seg.start_offset_m, dtype=np.float64),
+        np.asarray(seg.end_offset_m, dtype=np.float64),
+        np.asarray(edge, dtype=np.int64),
+        np.asarray(offset_m, dtype=np.float64),
+    )
+    return place
+
+
+@njit(cache=True, nogil=True)
+def _places(seg_edge, start_m, end_m, edge, offset_m):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """:func:`_stretch_of` of a segment's edges and their driven stretches' offsets."""
+    order = np.argsort(seg_edge, kind="mergesort")  # stable: equal edges in path order
+    ranked = seg_edge[order]
     lo = np.searchsorted(ranked, edge, side="left")
     hi = np.searchsorted(ranked, edge, side="right")
-    found = hi > lo
-    place = np.where(found, order[np.minimum(lo, len(order) - 1)], -1)
-    for i in np.flatnonzero(hi - lo > 1).tolist():
+    place = np.full(len(edge), -1, dtype=np.int64)
+    for i in range(len(edge)):
+        if hi[i] == lo[i]:
+            continue
+        if hi[i] - lo[i] == 1:
+            place[i] = order[lo[i]]
+            continue
         options = order[lo[i] : hi[i]]  # ascending: the sort is stable
         fits = options[
-            (seg.start_offset_m[options] - _EPS_M <= offset_m[i])
-            & (offset_m[i] <= seg.end_offset_m[options] + _EPS_M)
+            (start_m[options] - _EPS_M <= offset_m[i]) & (offset_m[i] <= end_m[options] + _EPS_M)
         ]
         if len(fits) == 0:
             fits = options
-        previous = int(place[i - 1]) if i > 0 else 0
-        later = fits[fits >= previous]
-        place[i] = int(later[0]) if len(later) else int(fits[-1])
-    return np.asarray(place, dtype=np.int64)
+        previous = place[i - 1] if i > 0 else 0
+        place[i] = fits[-1]
+        for f in fits:
+            if f >= previous:
+                place[i] = f
+                break
+    return place
 
 
-def _fixes_of(result: MatchResult, seg: Segment) -> IntArray:
-    p = result.points
-    return np.flatnonzero((p.segment == seg.index) & p.matched)
+@njit(cache=True, nogil=True)
+def _place_fixes(  # type: ignore[no-untyped-def]  # pragma: no cover
+    segment, point_segment, matched, edge, offset_m, seg_edge, start_m, end_m, edge_index, along
+):
+    """Fill ``edge_index`` and ``along`` for the matched fixes of ``segment``."""
+    fixes = np.flatnonzero((point_segment == segment) & matched)
+    if len(fixes) == 0 or len(seg_edge) == 0:
+        return
+    place = _places(seg_edge, start_m, end_m, edge[fixes], offset_m[fixes])
+    driven = end_m - start_m
+    start = np.empty(len(driven))
+    total = 0.0
+    for j in range(len(driven)):
+        start[j] = total
+        total += driven[j]
+    for i in range(len(fixes)):
+        k = place[i]
+        if k < 0:
+            continue
+        f = fixes[i]
+        into = min(max(offset_m[f] - start_m[k], 0.0), driven[k])
+        edge_index[f] = k
+        along[f] = start[k] + into
 
 
 def path_positions(result: MatchResult) -> PathPositions:
@@ -99,18 +138,23 @@ def path_positions(result: MatchResult) -> PathPositions:
     n = len(p.time_s)
     edge_index = np.full(n, -1, dtype=np.int64)
     along = np.full(n, np.nan)
+    point_segment = np.asarray(p.segment, dtype=np.int64)
+    matched = np.asarray(p.matched, dtype=np.bool_)
+    edge = np.asarray(p.edge, dtype=np.int64)
+    offset = np.asarray(p.offset_m, dtype=np.float64)
     for seg in result.segments:
-        fixes = _fixes_of(result, seg)
-        if len(fixes) == 0 or len(seg.edge) == 0:
-            continue
-        place = _stretch_of(seg, p.edge[fixes], p.offset_m[fixes])
-        ok = place >= 0
-        k = place[ok]
-        driven = seg.driven_m
-        start = np.concatenate(([0.0], np.cumsum(driven)[:-1]))
-        into = np.clip(p.offset_m[fixes[ok]] - seg.start_offset_m[k], 0.0, driven[k])
-        edge_index[fixes[ok]] = k
-        along[fixes[ok]] = start[k] + into
+        _place_fixes(
+            seg.index,
+            point_segment,
+            matched,
+            edge,
+            offset,
+            np.asarray(seg.edge, dtype=np.int64),
+            np.asarray(seg.start_offset_m, dtype=np.float64),
+            np.asarray(seg.end_offset_m, dtype=np.float64),
+            edge_index,
+            along,
+        )
     return PathPositions(edge_index=edge_index, along_m=along)
 
 

@@ -172,6 +172,8 @@ def edge_table(result: MatchResult, positions: PathPositions | None = None) -> E
     attrs = [s.attributes for s in segs]
 
     def cat(values: list[Any], dtype: type) -> Any:
+        if len(values) == 1:  # one segment, the most common: one copy, no concatenation
+            return np.array(values[0], dtype=dtype)
         return np.concatenate(values).astype(dtype) if values else np.zeros(0, dtype=dtype)
 
     return EdgeTable(
