@@ -419,7 +419,8 @@ class _Writer:
             self._step(_BOOL, len(self.ints))
             self.ints.append(column.values)
         elif isinstance(column, Const):
-            self.lit(json.dumps(column.value))
+            value = column.value
+            self.lit(_QUOTES[value] if isinstance(value, str) else json.dumps(value))
         elif isinstance(column, Tuple):
             column.write(self)
         elif isinstance(column, Nested) and column.table.rows == self.rows:
