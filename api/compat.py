@@ -1,6 +1,8 @@
 """
 What the OSRM- and Valhalla-compatible routes share.
 
+(Over 400 lines on purpose: the OSRM and Valhalla routes share this whole answer path.)
+
 - :func:`run_compat`: one match under the service's own limits (the match threads and their
   time budget, the point limit, the memory budget), its metrics and access-log fields, exactly
   as ``POST /v1/match`` has them; the request is parsed and the answer written in the match

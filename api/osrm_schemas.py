@@ -1,6 +1,9 @@
 """
 OSRM's match service on this matcher: the request read, the answer written, the documented shapes.
 
+(Over 400 lines on purpose: OSRM's request options and answer shapes are one contract, kept side
+by side so that each option's parsing sits beside what it changes in the answer.)
+
 The request is OSRM's ``/match/v1/{profile}/{coordinates}`` with its query options
 (project-osrm.org, "Match service"); :func:`parse_request` reads it into an
 :class:`OsrmRequest` (refusing what OSRM refuses, with OSRM's codes) and

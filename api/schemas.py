@@ -1,6 +1,8 @@
 """
 Request and response models of the HTTP API; every field is documented in OpenAPI.
 
+(Over 400 lines on purpose: the declarations are the OpenAPI documentation of every field.)
+
 The request envelope and the options are validated with these models (bounds included, so a
 sigma of -1 is a 422 naming ``options.sigma_m`` before the matcher sees it); the points are
 documented here (:class:`PointIn`) but checked by the trace reader. The response side documents what

@@ -1,6 +1,9 @@
 """
 What ``POST /v1/match`` does apart from HTTP, and the bounded thread pool it runs in.
 
+(Over 400 lines on purpose: parsing, matching and the bounded thread pool with its time budget
+are one request's path, read top to bottom.)
+
 Read the body, build the trace and the matcher configuration, match, and serialise.
 
 Route handlers stay thin: they read the body (:func:`api.intake.read_limited_body`) and hand it to

@@ -1,6 +1,9 @@
 """
 Valhalla's ``trace_attributes`` on this matcher: the request read, the answer written.
 
+(Over 400 lines on purpose: Valhalla's request and answer shapes are one contract, kept side by
+side so that each option's parsing sits beside what it changes in the answer.)
+
 The request is Valhalla's (valhalla.github.io, "Map Matching service API reference");
 :func:`parse_request` reads it into a :class:`ValhallaRequest` and :func:`build_answer` writes
 the answer. How the request maps onto the matcher:

@@ -1,6 +1,9 @@
 r"""
 JSON objects of many rows at once, from arrays: as text, or as Python objects.
 
+(Over 400 lines on purpose: the compiled writer, the program it runs and the number formatting
+must agree byte for byte with ``json.dumps`` and are checked against it together.)
+
 :mod:`mapmatch.export` declares each kind of feature once, as a :class:`Table` of named
 columns, and renders it as JSON text (:meth:`Table.text`) or as dicts
 (:meth:`Table.objects`); both show the same values, so ``json.loads(table.text())`` equals

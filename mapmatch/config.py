@@ -1,6 +1,8 @@
 """
 Every matching parameter in one validated object, each declared once with its metadata.
 
+(Over 400 lines on purpose: each parameter's declaration is the documentation of its default.)
+
 A field of :class:`MatchConfig` carries, in :class:`Param` metadata, its description (what it
 does and where its default comes from), its unit, its bounds and whether one request may
 override it. Everything else is generated from that one declaration: validation

@@ -1,6 +1,9 @@
 """
 Every serialised form of a match result, built from its arrays.
 
+(Over 400 lines on purpose: every serialised form is declared here from the same tables of
+columns, so that the forms cannot drift apart.)
+
 One module writes what a :class:`~mapmatch.result.MatchResult` becomes outside Python:
 
 - :func:`geojson_bytes`: the GeoJSON FeatureCollection as compact JSON text (what the batch

@@ -1,5 +1,8 @@
 """What a match returns: segments of driven edges, snapped points, length and its check.
 
+(Over 400 lines on purpose: the result's value objects (segments, edges, points, stats, check)
+are one public contract, documented together.)
+
 The result holds arrays; every serialised form of it (GeoJSON, tables, GeoDataFrames, the
 batch's files) is made by :mod:`mapmatch.export` when asked for. A segment's per-edge objects,
 road attributes and geometry are read from the network on first use, so a match that only

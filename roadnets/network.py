@@ -1,4 +1,8 @@
-"""The road network object users hold: arrays, spatial index, routing, geometry, graph view."""
+"""The road network object users hold: arrays, spatial index, routing, geometry, graph view.
+
+(Over 400 lines on purpose: it is the object users hold; its methods are thin and delegate to
+the modules beside it.)
+"""
 
 from __future__ import annotations
 

@@ -1,5 +1,8 @@
 """The compiled kernels of the edge-based router (:mod:`roadnets.routes`): search and look-up.
 
+(Over 400 lines on purpose: the search kernels share one scratch layout, and why the pruning is
+exact only shows when they are read together.)
+
 One bounded Dijkstra per source over the states of a :class:`~roadnets.turns.TurnGraph`.
 Two things keep it close to a node-based Dijkstra in cost:
 

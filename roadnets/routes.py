@@ -1,5 +1,8 @@
 """Edge-based bounded shortest routes that obey turn restrictions, many sources at once.
 
+(Over 400 lines on purpose: the router's public calls, its per-thread scratch and its answer
+object belong together.)
+
 The search runs over the states of a :class:`~roadnets.turns.TurnGraph` (edges, plus restricted
 copies for via-way restrictions), so a route never takes a banned turn nor drives a banned
 sequence. A route from edge ``a`` to edge ``b`` starts where ``a`` ends and stops where ``b``

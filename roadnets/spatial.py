@@ -1,5 +1,8 @@
 """R-trees over the network's segments and the nearby-edge query.
 
+(Over 400 lines on purpose: the two indexes over the same segment boxes and their query kernels
+belong together.)
+
 Two indexes over the same segment boxes:
 
 - :func:`build_rtree`, a libspatialindex R-tree (the ``rtree`` package): ``net.rtree``, for

@@ -1,6 +1,9 @@
 """
 ``/v1/trips``: live trips, one vehicle's fixes matched as they arrive (:mod:`api.trips`).
 
+(Over 400 lines on purpose: the four trip routes share their request models and the answers they
+build.)
+
 - ``POST /v1/trips`` opens a trip: ``{"trip_id"?, "network"?, "lag_s"?, "max_lag_s"?,
   "options"?}`` (all optional; an empty body is a trip with the defaults). 201.
 - ``POST /v1/trips/{trip_id}/fixes`` adds one fix (a JSON object with ``time``, ``lat``,

@@ -1,6 +1,8 @@
 """
 Where batch tasks run: in this process, in a local process pool, or on a Dask cluster.
 
+(Over 400 lines on purpose: the three executors share one interface and one retry loop.)
+
 All three take a picklable, module-level function and a list of tasks and yield
 ``(task, outcome)`` pairs as tasks finish, where ``outcome`` is the function's return value
 or the exception that ended the task (a crashed worker, a lost connection ...), so that the

@@ -1,6 +1,9 @@
 """
 Output side of batch matching: per-trace files written atomically, and ``summary.csv``.
 
+(Over 400 lines on purpose: every output format's writer and summary.csv share the atomic-write
+and naming rules.)
+
 Per trace, in the output folder:
 
 ``geojson``

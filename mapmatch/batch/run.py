@@ -1,6 +1,9 @@
 """
 Batch matching: folders of trace files in, one output per trace and ``summary.csv`` out.
 
+(Over 400 lines on purpose: the batch's steps (check the output folder, plan, run, retry,
+summarise) share one plan and one progress report.)
+
 :func:`run_batch` is the engine behind ``mapmatch match``:
 
 1. the output folder is made and checked writable (else one clear error, before any work);

@@ -1,6 +1,9 @@
 """
 The extended Kalman filter core: a tight sequential loop, compiled with numba.
 
+(Over 400 lines on purpose: the filter's prediction and updates are one compiled loop over one
+state layout, declared once.)
+
 State (7): ``x, y`` (metres east/north of the track origin), ``yaw`` (radians counter-clockwise
 from east), ``v`` (speed along the heading, m/s), ``bg`` (gyro bias, rad/s), ``so`` (odometer
 scale: odometer reading / true distance), ``sg`` (gyro scale error: true rate =

@@ -1,5 +1,8 @@
 """Loops and spurs in a matched path that the fixes do not support, taken out.
 
+(Over 400 lines on purpose: finding loops and spurs and pricing them are one compiled pass over
+the path.)
+
 The HMM is first order: it prices each move on its own, so it cannot see that three cheap
 moves in a row go round a 40 m roundabout, or that a drive back after a U-turn in the middle of
 a road, then forward again after a second one, ends where it began. Scattered fixes around a

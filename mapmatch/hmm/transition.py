@@ -1,5 +1,8 @@
 """Log transition of every candidate pair: the best of its explanations.
 
+(Over 400 lines on purpose: every explanation of a candidate pair (forward, mid-road U-turn,
+holding) is scored in one compiled kernel.)
+
 Newson & Krumm's exponential in ``|great-circle - route|`` with a scale that grows with the
 interval and the position sigma, a speed-plausibility term against the roads' limits
 (reference paper, eq. 24), a flat-bottomed term against the distance the trace says it

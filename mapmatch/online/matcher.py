@@ -1,6 +1,10 @@
 """
 ``OnlineMatcher``: a vehicle's fixes matched as they arrive, with the distance so far.
 
+(Over 400 lines on purpose: the settling rules (when a round runs, where the path is cut, what
+settles) act on one trip state and read best together; the stages live in ``tail`` and
+``window``.)
+
 Design
 ------
 Three ways to match a stream with an HMM were weighed:

@@ -1,6 +1,9 @@
 """
 The tail of a live trip: the fixes not yet settled, and enough settled ones before them.
 
+(Over 400 lines on purpose: the tail's store, the input stages run on it and its trimming share
+one data layout.)
+
 The offline stages judge a fix by its neighbours: its speed from the fixes on either side,
 its observation from the fixes that follow (a stray is a fix that one of the next two comes back
 from), its outlier verdict from the observations around it. So the tail keeps, before the first

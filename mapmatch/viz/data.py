@@ -1,5 +1,8 @@
 """What the match drawings show, as plain arrays and tables (no plotting library needed).
 
+(Over 400 lines on purpose: one place for what both drawings show, so that they cannot
+disagree.)
+
 Both drawings (:mod:`mapmatch.viz.leaflet` and :mod:`mapmatch.viz.static`) take their
 geometry from here, so the interactive map and the static figure always show the same thing.
 """

@@ -1,4 +1,8 @@
-"""An interactive (folium/Leaflet) map of a match that needs no tile server and no internet."""
+"""An interactive (folium/Leaflet) map of a match that needs no tile server and no internet.
+
+(Over 400 lines on purpose: each layer is a short function, and the layers share the page's one
+canvas, legend and offline assets.)
+"""
 
 from __future__ import annotations
 
