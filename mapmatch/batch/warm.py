@@ -55,6 +55,18 @@ def warm_up() -> float:
             lat = [43.73001, 43.73002, 43.73001, 43.7304, 43.7308]
             trace = Trace(time=[0, 5, 10, 15, 20], lon=lon, lat=lat, heading=[90, 90, 90, 0, 0])
             geojson_bytes(match(trace, net))  # the writer's number kernel too
+            # every column given: the travel terms (speed, odometer) and per-fix accuracy
+            # compile kernel variants of their own
+            full = Trace(
+                time=[0, 5, 10, 15, 20],
+                lon=lon,
+                lat=lat,
+                heading=[90, 90, 90, 0, 0],
+                speed=[4.0, 4.0, 4.0, 4.0, 4.0],
+                accuracy=[4.0, 4.0, 4.0, 4.0, 4.0],
+                odometer=[0.0, 40.0, 80.0, 110.0, 150.0],
+            )
+            geojson_bytes(match(full, net))
             return time.perf_counter() - started
         return 0.0
     finally:

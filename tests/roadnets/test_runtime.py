@@ -187,6 +187,7 @@ def test_network_build_on_a_cached_network_says_so(
     first = capsys.readouterr().out
     assert "(parsed, compiled, indexed)" in first
     assert "kernels      " in first
+    assert "matcher      kernels ready in " in first  # the matcher's kernels warmed too
     assert main(args) == 0
     again = capsys.readouterr().out
     build = next(line for line in again.splitlines() if line.startswith("build"))
