@@ -295,20 +295,26 @@ def transitions_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - co
             r_dist[k], r_time[k], r_turns[k],
         )  # fmt: skip
         travel, slack = (travel_m[t], slack_m[t]) if len(travel_m) else (np.nan, 0.0)
+        # at a dead end's end turning is no choice, so a U-turn there costs what evidence does:
+        # the route from a dead-end edge onto its twin turns at the end node, and a U-turn in
+        # the middle of such an edge counts when the fixes reached the end (within a held
+        # car's scatter)
+        dead_end = e2 == edge_twin[e1] and dead_end_ahead(
+            e1, graph[0], graph[1], graph[2], edge_twin
+        )
+        forced = min(penalty[k], params[P_UTURN_EVIDENCE_PENALTY])
         turn = kind[k] == ROUTE_UTURN_AT_NODE
         lt[k] = transition_score(
-            step_m[t], route, free, turn, dt[t], s, travel, slack, penalty[k], params
-        )
-        # a U-turn in the middle of the road; at a dead end's end turning is no choice (the
-        # fixes reached the end, within a held car's scatter), so it costs what evidence does
+            step_m[t], route, free, turn, dt[t], s, travel, slack,
+            forced if dead_end else penalty[k], params,
+        )  # fmt: skip
+        # a U-turn in the middle of the road
         u = uturn_route(e2, oa[k], ob[k], edge_len[e1], edge_twin[e1])
         if np.isfinite(u):
             cost = penalty[k]
             short_of_end = edge_len[e1] - max(oa[k], edge_len[e1] - ob[k])
-            if short_of_end <= tolerance[k] and dead_end_ahead(
-                e1, graph[0], graph[1], graph[2], edge_twin
-            ):
-                cost = min(cost, params[P_UTURN_EVIDENCE_PENALTY])
+            if dead_end and short_of_end <= tolerance[k]:
+                cost = forced
             score = transition_score(
                 step_m[t], u, u / edge_speed[e1], True, dt[t], s, travel, slack, cost, params
             )
