@@ -538,7 +538,7 @@ def markdown(rows: list[Row], header: dict[str, Any]) -> str:
         f"Peer comparison, {header['date']}, {header['nproc']} cores ({header['cpu']}), "
         f"one process and one thread per matcher, median of at least {header['repeats']} timed "
         f"passes (more until {header['min_time_s']:g} s of matching; leuven: one) after a "
-        "warm-up trace (ours: `match` + `to_geojson()`; FMM: `match_wkt` + its path in "
+        "warm-up trace (ours: `match` + `geojson_bytes()`; FMM: `match_wkt` + its path in "
         f"lon/lat); {header['traces_per_set']} traces per set from "
         f"{header['trace_source']}, outlier rate {header['outlier_rate']:g} (40 m); "
         f"scoring tolerance {scoring.DEFAULT_TOLERANCE_M:g} m, direction within "

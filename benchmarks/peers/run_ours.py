@@ -2,9 +2,10 @@
 
 ``roadnets.load`` is the timed load (the compiled network cache counts as a normal second load);
 traces are read with ``mapmatch.read_traces`` (not timed, like the peers' input preparation);
-the timed call is ``mapmatch.match`` followed by ``result.to_geojson()``, the output a user gets
-(as FMM's conversion of its result and Meili's JSON response are timed). The geometry is the
-LineStrings of the GeoJSON's ``kind == "segment"`` features, in driving order.
+the timed call is ``mapmatch.match`` followed by ``mapmatch.export.geojson_bytes(result)``, the
+GeoJSON document a user gets (what ``POST /v1/match`` answers and ``mapmatch match`` writes), as
+FMM's conversion of its result to lon/lat and Meili's JSON response text are timed. The
+geometry is the LineStrings of the GeoJSON's ``kind == "segment"`` features, in driving order.
 
 Input: whatever columns the job's traces CSV has (positions only, or with heading, speed,
 accuracy and odometer); ``mapmatch.read_traces`` takes them all.
@@ -48,10 +49,11 @@ def prepare(ctx: dict[str, Any], tr: TracePoints) -> Any:
 
 
 def match(ctx: dict[str, Any], trace: Any) -> Any:
-    """One ``mapmatch.match`` call and the GeoJSON of its result."""
+    """One ``mapmatch.match`` call and the GeoJSON text of its result."""
     import mapmatch
+    from mapmatch.export import geojson_bytes
 
-    return mapmatch.match(trace, ctx["net"], ctx["config"]).to_geojson()
+    return geojson_bytes(mapmatch.match(trace, ctx["net"], ctx["config"]))
 
 
 def geometry(ctx: dict[str, Any], tr: TracePoints, raw: Any) -> Geometry:
