@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 STAMP_RUN := $(VENV)/.installed-run
 STAMP_DEV := $(VENV)/.installed-dev
 
-.PHONY: demo test lint pytest install install-dev bench clean
+.PHONY: demo test lint pytest install install-dev bench clean clean-kernels
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -49,3 +49,8 @@ bench: $(STAMP_DEV)
 
 clean:
 	rm -rf $(VENV) demo-out .pytest_cache .mypy_cache .ruff_cache
+
+# numba's on-disk cache of a kernel is keyed by its own file only: after editing a compiled
+# function that kernels in other files call, drop the caches (the next match recompiles)
+clean-kernels:
+	find mapmatch roadnets -name '*.nbi' -delete -o -name '*.nbc' -delete
