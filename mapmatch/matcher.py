@@ -9,6 +9,7 @@ held against the fused trip distance.
 
 from __future__ import annotations
 
+import logging
 import time
 import weakref
 from pathlib import Path
@@ -43,6 +44,24 @@ __all__ = ["match"]
 
 #: The configuration of a match called without one (frozen: shared).
 _DEFAULT = MatchConfig()
+_log = logging.getLogger(__name__)
+#: Whether this process has looked for the compiled kernels yet (see :func:`_announce_compile`).
+_LOOKED = False
+
+
+def _announce_compile() -> None:
+    """Say so, once per process, when the first match is about to compile every kernel."""
+    global _LOOKED  # one look per process
+    if _LOOKED:
+        return
+    _LOOKED = True
+    from mapmatch.hmm.kernels import kernels_on_disk
+
+    if not kernels_on_disk():
+        _log.warning(
+            "compiling the matcher's kernels for this install: about a minute, once "
+            "(`mapmatch network build` does it ahead)"
+        )
 
 
 def match(
@@ -90,6 +109,7 @@ def match(
         ``deadline`` passed before the match was done.
     """
     check_match_inputs(trace, net)
+    _announce_compile()
     config = config or _DEFAULT
     timings: dict[str, float] = {}
     clock = time.perf_counter()

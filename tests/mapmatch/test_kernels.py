@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -88,3 +89,22 @@ def test_a_process_loading_the_kernels_from_the_cache_matches_the_same(
     here = [mapmatch.match(t.trace, default_net).matched_length_m for t in trips]
     assert runs[0] == runs[1]
     assert json.loads(runs[0]) == here
+
+
+def test_a_fresh_install_is_told_that_the_first_match_compiles(tmp_path: Path) -> None:
+    # an empty numba cache is a fresh install: the first match says it compiles, once
+    code = (
+        "import logging, sys\n"
+        "logging.basicConfig(stream=sys.stdout, level=logging.WARNING)\n"
+        "from mapmatch.hmm.kernels import kernels_on_disk\n"
+        "from mapmatch.matcher import _announce_compile\n"
+        "print(kernels_on_disk())\n"
+        "_announce_compile(); _announce_compile()\n"
+    )
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120
+    )
+    lines = out.stdout.splitlines()
+    assert lines[0] == "False", out.stderr
+    assert sum("compiling the matcher's kernels" in line for line in lines) == 1
