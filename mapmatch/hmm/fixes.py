@@ -31,6 +31,7 @@ __all__ = [
     "estimated_sigma_m",
     "fixes_of",
     "hold_limit_m",
+    "observations_of",
     "observe",
     "reported_travel",
     "speed_from_positions",
@@ -215,9 +216,9 @@ def speed_from_positions(step_m: FloatArray, dt_s: FloatArray) -> FloatArray:
     return np.asarray(speed, dtype=np.float64)
 
 
-def observe(net: RoadNetwork, fixes: Fixes, config: MatchConfig) -> tuple[Observations, Candidates]:
-    """The HMM's observations of the fixes and their candidates."""
-    obs = merge_fixes(
+def observations_of(fixes: Fixes, config: MatchConfig) -> Observations:
+    """The fixes merged into the HMM's observations (:func:`merge_fixes` on their columns)."""
+    return merge_fixes(
         fixes.x,
         fixes.y,
         fixes.time_s,
@@ -229,6 +230,11 @@ def observe(net: RoadNetwork, fixes: Fixes, config: MatchConfig) -> tuple[Observ
         config,
         fixes.segment_starts,
     )
+
+
+def observe(net: RoadNetwork, fixes: Fixes, config: MatchConfig) -> tuple[Observations, Candidates]:
+    """The HMM's observations of the fixes and their candidates."""
+    obs = observations_of(fixes, config)
     return obs, find_candidates(net, obs.x, obs.y, obs.radius_m, config)
 
 

@@ -39,8 +39,8 @@ from typing import TYPE_CHECKING, Final, cast
 import numpy as np
 
 from mapmatch.hmm.candidates import Candidates, find_candidates
-from mapmatch.hmm.fixes import Fixes, estimated_sigma_m, fixes_of, with_sigma
-from mapmatch.hmm.observations import Observations, Travel, group_fixes, merge_fixes
+from mapmatch.hmm.fixes import Fixes, estimated_sigma_m, fixes_of, observations_of, with_sigma
+from mapmatch.hmm.observations import Observations, Travel, group_fixes
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -224,6 +224,7 @@ def rows(obs: Observations, lo: int, hi: int) -> Observations:
     Examples
     --------
     >>> from mapmatch.config import MatchConfig
+    >>> from mapmatch.hmm.observations import merge_fixes
     >>> x = np.array([0.0, 1.0, 30.0, 60.0])
     >>> obs = merge_fixes(x, np.zeros(4), np.arange(4.0), np.full(4, 5.0), np.full(4, 50.0),
     ...                   np.full(4, np.nan), None, None, MatchConfig())
@@ -257,22 +258,6 @@ def rows(obs: Observations, lo: int, hi: int) -> Observations:
         speed_mps=obs.speed_mps[lo:hi],
         heading_deg=None if obs.heading_deg is None else obs.heading_deg[lo:hi],
         travel=travel,
-    )
-
-
-def _observations(fixes: Fixes, config: MatchConfig) -> Observations:
-    """The fixes merged into observations, as :func:`~mapmatch.hmm.fixes.observe` merges them."""
-    return merge_fixes(
-        fixes.x,
-        fixes.y,
-        fixes.time_s,
-        fixes.sigma_m,
-        fixes.radius_m,
-        fixes.speed_mps,
-        fixes.heading_deg,
-        fixes.travel,
-        config,
-        fixes.segment_starts,
     )
 
 
@@ -399,7 +384,7 @@ class Tail:
         view = store.view(self.trip_id, starts[starts < n])
         x, y = store.column("x"), store.column("y")
         fixes = fixes_of(view.as_trace(), x, y, self.config)
-        obs = _observations(fixes, self.config)
+        obs = observations_of(fixes, self.config)
         first_real = 1 if self.has_pred else 0
         final = _final_count(obs, n, closing)
         sigma = float("nan")
@@ -409,7 +394,7 @@ class Tail:
             sigma = estimated_sigma_m(rows(obs, first_real, final), self.candidates(obs, live, own))
             if sigma > 1.25 * self.config.sigma_m:  # noisier than assumed: look again, wider
                 fixes = with_sigma(fixes, sigma, self.config)
-                obs = _observations(fixes, self.config)
+                obs = observations_of(fixes, self.config)
                 final = _final_count(obs, n, closing)
                 keys = self._keys(obs)
             else:
