@@ -349,3 +349,11 @@ def start_thread_server() -> Any:
 def start_serve_process() -> Any:
     """:func:`serve_process`, for tests that need a ``mapmatch serve`` of their own."""
     return serve_process
+
+
+@pytest.fixture(scope="module")
+def api_schema(live: ServeProcess) -> Any:
+    """The served OpenAPI document, for the schemathesis fuzzing tests."""
+    import schemathesis
+
+    return schemathesis.openapi.from_url(live.base_url + "/openapi.json")

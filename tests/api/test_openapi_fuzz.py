@@ -6,20 +6,13 @@ Responses must also match the documented status codes and schemas.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import pytest
-import schemathesis
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
-from schemathesis.specs.openapi.checks import (
-    content_type_conformance,
-    response_schema_conformance,
-    status_code_conformance,
-)
 
-if TYPE_CHECKING:
-    from schemathesis import Case
+from tests.api.fuzzing import BOUNDED, MONACO, fuzz_operation
 
 OPERATIONS = [
     ("/v1/match", "POST", 60),
@@ -30,47 +23,15 @@ OPERATIONS = [
 ]
 
 
-@pytest.fixture(scope="module")
-def api_schema(live) -> Any:
-    return schemathesis.openapi.from_url(live.base_url + "/openapi.json")
-
-
-def not_a_server_error(ctx: Any, response: Any, case: Case) -> None:
-    assert response.status_code < 500, (
-        f"{case.method} {case.path} answered {response.status_code}: {response.text[:500]}"
-    )
-
-
 @pytest.mark.parametrize(("path", "method", "examples"), OPERATIONS)
 def test_no_input_produces_a_server_error(
     api_schema: Any, path: str, method: str, examples: int
 ) -> None:
-    operation = api_schema[path][method]
-
-    @given(case=operation.as_strategy())
-    @settings(
-        max_examples=examples,
-        derandomize=True,
-        deadline=None,
-        suppress_health_check=list(HealthCheck),
-        database=None,
-    )
-    def run(case: Case) -> None:
-        case.call_and_validate(
-            checks=[
-                not_a_server_error,
-                status_code_conformance,
-                content_type_conformance,
-                response_schema_conformance,
-            ]
-        )
-
-    run()
+    fuzz_operation(api_schema, path, method, examples)
 
 
 # Random but well-formed traces inside the served network's bounding box reach the matcher
 # itself (the schema-driven cases above almost never land on a road).
-MONACO = (7.4049, 43.7245, 7.4395, 43.7519)
 
 coords = st.tuples(
     st.floats(MONACO[0], MONACO[2], allow_nan=False),
@@ -103,13 +64,7 @@ options = st.fixed_dictionaries(
 
 
 @given(points=st.lists(point, min_size=2, max_size=40), opts=options)
-@settings(
-    max_examples=60,
-    derandomize=True,
-    deadline=None,
-    database=None,
-    suppress_health_check=list(HealthCheck),
-)
+@settings(BOUNDED, max_examples=60)
 def test_random_traces_on_the_map_never_crash_the_matcher(client, points, opts) -> None:
     body_points = []
     for p in points:

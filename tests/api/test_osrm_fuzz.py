@@ -11,18 +11,13 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 import pytest
-import schemathesis
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
-from schemathesis.specs.openapi.checks import (
-    content_type_conformance,
-    response_schema_conformance,
-    status_code_conformance,
-)
+
+from tests.api.fuzzing import BOUNDED, MONACO, fuzz_operation
 
 if TYPE_CHECKING:
     import httpx
-    from schemathesis import Case
 
 OPERATIONS = [
     ("/match/{version}/{profile}/{coordinates}", "GET", 40),
@@ -31,42 +26,13 @@ OPERATIONS = [
     ("/trace_attributes", "POST", 40),
     ("/trace_attributes", "GET", 20),
 ]
-MONACO = (7.4049, 43.7245, 7.4395, 43.7519)
-_BOUNDED = settings(
-    derandomize=True, deadline=None, database=None, suppress_health_check=list(HealthCheck)
-)
-
-
-@pytest.fixture(scope="module")
-def api_schema(live) -> Any:
-    return schemathesis.openapi.from_url(live.base_url + "/openapi.json")
-
-
-def not_a_server_error(ctx: Any, response: Any, case: Case) -> None:
-    assert response.status_code < 500, (
-        f"{case.method} {case.path} answered {response.status_code}: {response.text[:500]}"
-    )
 
 
 @pytest.mark.parametrize(("path", "method", "examples"), OPERATIONS)
 def test_no_input_produces_a_server_error(
     api_schema: Any, path: str, method: str, examples: int
 ) -> None:
-    operation = api_schema[path][method]
-
-    @given(case=operation.as_strategy())
-    @settings(_BOUNDED, max_examples=examples)
-    def run(case: Case) -> None:
-        case.call_and_validate(
-            checks=[
-                not_a_server_error,
-                status_code_conformance,
-                content_type_conformance,
-                response_schema_conformance,
-            ]
-        )
-
-    run()
+    fuzz_operation(api_schema, path, method, examples)
 
 
 position = st.tuples(
@@ -77,7 +43,7 @@ trace = st.lists(st.tuples(position, st.integers(0, 30)), min_size=2, max_size=3
 
 
 @given(points=trace, tidy=st.booleans(), gaps=st.sampled_from(["split", "ignore"]))
-@settings(_BOUNDED, max_examples=40)
+@settings(BOUNDED, max_examples=40)
 def test_random_traces_on_the_map_never_crash_the_osrm_route(
     client: httpx.Client, points: list[tuple[tuple[float, float], int]], tidy: bool, gaps: str
 ) -> None:
@@ -100,7 +66,7 @@ def test_random_traces_on_the_map_never_crash_the_osrm_route(
 
 
 @given(points=trace, timed=st.booleans(), use=st.booleans())
-@settings(_BOUNDED, max_examples=40)
+@settings(BOUNDED, max_examples=40)
 def test_random_traces_on_the_map_never_crash_the_valhalla_route(
     client: httpx.Client, points: list[tuple[tuple[float, float], int]], timed: bool, use: bool
 ) -> None:
