@@ -28,11 +28,10 @@ from typing import TYPE_CHECKING, Any, Final, TypeVar
 import numpy as np
 from starlette.responses import JSONResponse, Response
 
-from api.costs import check_budget, match_cost
 from api.deps import get_metrics, get_service
 from api.errors import INTERNAL_ERROR, OptionError, error_answer, rule_for
 from api.middleware import SCOPE_KEY
-from api.service import MatchOutcome, match_within, past_budget
+from api.service import MatchOutcome
 from mapmatch import ConfigError, MatchConfig
 
 if TYPE_CHECKING:
@@ -166,31 +165,17 @@ async def run_compat(
     """
     service = get_service(request)
     service.networks.get(None)  # not_ready / network_unavailable before queueing
-    budget_s = service.runner.budget_s
-    deadline = time.monotonic() + budget_s
+    deadline = time.monotonic() + service.runner.budget_s
 
     def job() -> MatchOutcome:
         started = time.perf_counter()
         parsed, options = build()
         net = service.networks.get(parsed.network)
         config = _config(parsed.overrides)
-        cost = match_cost(parsed.trace, config, service.networks.density(net.network_id))
-        check_budget(cost, service.memory_budget_mb, parsed.overrides)
-        past_budget(budget_s, deadline)
-        result = match_within(
-            budget_s, deadline, parsed.trace, net, config, diagnostics=parsed.diagnostics
+        result = service.match(
+            parsed.trace, net, config, parsed.overrides, deadline, diagnostics=parsed.diagnostics
         )
-        past_budget(budget_s, deadline)
-        content = answer(Matched(parsed, result, net), options)
-        return MatchOutcome(
-            content=content,
-            trace_id=result.trace_id,
-            network=net.network_id,
-            points=result.stats.points,
-            matched_points=result.stats.matched_points,
-            breaks=len(result.breaks),
-            seconds=time.perf_counter() - started,
-        )
+        return MatchOutcome.of(result, answer(Matched(parsed, result, net), options), started)
 
     outcome = await service.runner.run(job)
     info = request.scope.get(SCOPE_KEY)

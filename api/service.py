@@ -92,12 +92,20 @@ def match_within(
     config: MatchConfig,
     **options: Any,
 ) -> mapmatch.MatchResult:
-    """:func:`mapmatch.match` stopped between its stages once ``deadline`` has passed (504)."""
+    """
+    :func:`mapmatch.match` under the time budget (504 ``timeout`` past ``deadline``).
+
+    Not started once ``deadline`` has passed, stopped between its stages after it, and not
+    answered when it finished too late.
+    """
+    past_budget(budget_s, deadline)
     try:
-        return mapmatch.match(trace, net, config, deadline=deadline, **options)
+        result = mapmatch.match(trace, net, config, deadline=deadline, **options)
     except mapmatch.DeadlineExceededError as exc:
         msg = f"the match ran past the {budget_s:g} s time budget ({exc.stage} stage done)"
         raise MatchTimeoutError(msg) from None
+    past_budget(budget_s, deadline)
+    return result
 
 
 @dataclass(frozen=True, slots=True)
@@ -111,6 +119,19 @@ class MatchOutcome:
     matched_points: int
     breaks: int
     seconds: float
+
+    @classmethod
+    def of(cls, result: mapmatch.MatchResult, content: bytes, started: float) -> MatchOutcome:
+        """The outcome of ``result`` answered as ``content``; ``started`` by perf_counter."""
+        return cls(
+            content=content,
+            trace_id=result.trace_id,
+            network=result.network["id"],
+            points=result.stats.points,
+            matched_points=result.stats.matched_points,
+            breaks=len(result.breaks),
+            seconds=time.perf_counter() - started,
+        )
 
 
 class MatchRunner:
@@ -254,29 +275,31 @@ class MatchService:
             overrides = query.options()
         net = self.networks.get(network_id)
         config = _config(overrides)
-        cost = match_cost(trace, config, self.networks.density(net.network_id))
-        check_budget(cost, self.memory_budget_mb, overrides)
-        self._check_deadline(deadline)
-        result = match_within(
-            self.runner.budget_s, deadline, trace, net, config, fused_distance_m=fused_m
-        )
-        self._check_deadline(deadline)
+        result = self.match(trace, net, config, overrides, deadline, fused_distance_m=fused_m)
         if query.polyline is None:
             content = geojson_bytes(result)  # written from the result's arrays
         else:
             content = _with_polylines(result, query.polyline)
-        return MatchOutcome(
-            content=content,
-            trace_id=result.trace_id,
-            network=net.network_id,
-            points=result.stats.points,
-            matched_points=result.stats.matched_points,
-            breaks=len(result.breaks),
-            seconds=time.perf_counter() - started,
-        )
+        return MatchOutcome.of(result, content, started)
 
-    def _check_deadline(self, deadline: float) -> None:
-        past_budget(self.runner.budget_s, deadline)
+    def match(
+        self,
+        trace: mapmatch.Trace,
+        net: RoadNetwork,
+        config: MatchConfig,
+        overrides: dict[str, object],
+        deadline: float,
+        **options: Any,
+    ) -> mapmatch.MatchResult:
+        """
+        One match under the service's limits.
+
+        Its estimated memory is held against the budget (413 ``over_budget`` naming the
+        options), then it runs :func:`match_within` the time budget.
+        """
+        cost = match_cost(trace, config, self.networks.density(net.network_id))
+        check_budget(cost, self.memory_budget_mb, overrides)
+        return match_within(self.runner.budget_s, deadline, trace, net, config, **options)
 
     def _from_json(
         self, body: bytes, query: MatchQuery
