@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 from pathlib import Path
@@ -402,3 +403,26 @@ def test_cli_writes_realistic_plain_gps_traces(tmp_path: Path) -> None:
     assert any(r["outages"] for r in records)
     assert any(r["stops"] for r in records)
     assert main(["simulate", "--out", str(tmp_path), "--canyon-s", "9", "3"]) != 0
+
+
+def test_ends_error_is_what_the_end_fixes_noise_moves_the_length_by(
+    default_net: roadnets.RoadNetwork,
+) -> None:
+    clean = simulate_trip(default_net, SimulationConfig.noise_free(), seed=8)
+    assert clean.ends_error() == pytest.approx(0.0, abs=1e-6)
+    # the last fix moved 20 m ahead along the true heading: the length grows by 20 m
+    last = len(clean.trace) - 1
+    j = int(np.argmin(np.abs(clean.dense_time_s - clean.trace.time_s[last])))
+    heading = np.radians(clean.dense_heading_deg[j])
+    lon, lat = clean.trace.lon.copy(), clean.trace.lat.copy()
+    metres_per_deg = 6_371_008.8 * np.pi / 180
+    lat[last] += 20.0 * np.cos(heading) / metres_per_deg
+    lon[last] += 20.0 * np.sin(heading) / (metres_per_deg * np.cos(np.radians(lat[last])))
+    moved = mapmatch.Trace.from_records(
+        [
+            {"time": t, "lon": x, "lat": y}
+            for t, x, y in zip(clean.trace.time_s, lon, lat, strict=True)
+        ]
+    )
+    shifted = dataclasses.replace(clean, trace=moved)
+    assert shifted.ends_error() * clean.length_m == pytest.approx(20.0, abs=0.05)

@@ -103,6 +103,7 @@ def match_row(
         canyons=len(trip.canyons),
         score=score,
         error=error,
+        ends_error=trip.ends_error(),
     )
     return row, result
 

@@ -31,6 +31,9 @@ class Cell:
     the length bands. ``verdict_trips`` / ``verdict_accuracy``: trips with an odometer and no
     break, and the share of them whose verdict is the one the true length gives (NaN when
     none). ``points_per_s``: fixes matched per second of matching in the run's processes.
+    ``ends_within_1pct`` / ``_2pct``: the share of trips whose exact route, cut at the noisy
+    first and last fix, is within 1 % / 2 % (:attr:`TripRow.ends_error`): the most a matcher
+    can reach where the neighbouring fixes say nothing of the ends (sparse sampling).
     """
 
     extract: str
@@ -52,6 +55,8 @@ class Cell:
     spurious_loops: int
     verdict_trips: int
     verdict_accuracy: float
+    ends_within_1pct: float
+    ends_within_2pct: float
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready (NaN becomes ``None``)."""
@@ -61,7 +66,16 @@ class Cell:
         }
 
 
+def _ends_within(rows: list[TripRow], band: float) -> float:
+    errors = [abs(r.ends_error) for r in rows if not math.isnan(r.ends_error)]
+    return sum(e <= band for e in errors) / len(errors) if errors else float("nan")
+
+
 def _cell(extract: str, condition: str, spec: str, rows: list[TripRow]) -> Cell:
+    ends = {
+        "ends_within_1pct": _ends_within(rows, 0.01),
+        "ends_within_2pct": _ends_within(rows, 0.02),
+    }
     scores = [r.score for r in rows if r.score is not None]
     ok = len(scores) / len(rows) if rows else 0.0
     seconds = sum(r.match_s for r in rows if r.score is not None)
@@ -88,6 +102,7 @@ def _cell(extract: str, condition: str, spec: str, rows: list[TripRow]) -> Cell:
             spurious_loops=0,
             verdict_trips=0,
             verdict_accuracy=nan,
+            **ends,
         )
     s = summarise(scores)
     return Cell(
@@ -110,6 +125,7 @@ def _cell(extract: str, condition: str, spec: str, rows: list[TripRow]) -> Cell:
         spurious_loops=int(s["spurious_loops"]),
         verdict_trips=int(s["verdict_trips"]),
         verdict_accuracy=s["verdict_accuracy"],
+        **ends,
     )
 
 

@@ -49,6 +49,9 @@ class TripRow:
     """
     One trip matched with one column spec: its score, or the error that stopped the match.
 
+    ``ends_error`` is the trip's :meth:`~mapmatch.evaluation.simulate.SimulatedTrip.ends_error`:
+    what the exact route cut at the noisy end fixes gets wrong, whatever the matcher.
+
     ``trip_id`` (``<extract>:<condition>:<index>``) re-runs it with ``--inspect``.
     """
 
@@ -64,6 +67,7 @@ class TripRow:
     canyons: int
     score: TripScore | None
     error: str = ""
+    ends_error: float = float("nan")
 
     @property
     def trip_id(self) -> str:
@@ -84,6 +88,7 @@ class TripRow:
             "stops": self.stops,
             "outages": self.outages,
             "canyons": self.canyons,
+            "ends_error": self.ends_error,
             "error": self.error,
         }
         if self.score is not None:

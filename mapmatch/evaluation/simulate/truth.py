@@ -127,6 +127,32 @@ class SimulatedTrip:
     uturns: int = 0
     loops: int = 0
 
+    def ends_error(self) -> float:
+        """
+        The relative length error of the true route cut where the first and last fix lie.
+
+        Each end fix's position error along the true driving direction there moves the end
+        of any match by as much, so ``(along_last - along_first) / length_m`` is the error a
+        matcher that found the exact route would still make from those two fixes alone: at
+        sparse sampling, where the neighbouring fixes say nothing of an end, the floor of
+        the length error. (At 1 s, fixes near the ends can average it away.)
+        """
+        if self.length_m <= 0 or len(self.trace) == 0:
+            return float("nan")
+        along = [self._along_error_m(i) for i in (0, len(self.trace) - 1)]
+        return (along[1] - along[0]) / self.length_m
+
+    def _along_error_m(self, i: int) -> float:
+        """Fix ``i``'s position error along the true heading at its time, metres (ahead > 0)."""
+        from roadnets.projection import EARTH_RADIUS_M
+
+        j = int(np.argmin(np.abs(self.dense_time_s - self.trace.time_s[i])))
+        lat0 = np.radians(self.true_lat[i])
+        east = np.radians(self.trace.lon[i] - self.true_lon[i]) * np.cos(lat0) * EARTH_RADIUS_M
+        north = np.radians(self.trace.lat[i] - self.true_lat[i]) * EARTH_RADIUS_M
+        heading = np.radians(self.dense_heading_deg[j])
+        return float(east * np.sin(heading) + north * np.cos(heading))
+
     def truth_record(self) -> dict[str, Any]:
         """
         The truth as one JSON object (a line of ``truth.jsonl``).
