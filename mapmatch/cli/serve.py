@@ -94,7 +94,7 @@ def add_parser(sub: Any) -> None:
         "--time-budget-s", type=float, default=None, help="seconds per match request (30)"
     )
     parser.add_argument(
-        "--match-threads", type=int, default=None, help="matches at once per worker (4)"
+        "--match-threads", type=int, default=None, help="matches at once per worker (2)"
     )
     parser.add_argument("--no-access-log", action="store_true", help="no JSON access log lines")
     parser.add_argument(

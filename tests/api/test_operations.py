@@ -2,21 +2,24 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 import re
+import signal
+import socket
 import threading
 import time
-from typing import TYPE_CHECKING, Any
+from pathlib import Path
+from typing import Any
 
 import httpx
 import pytest
 
-from api.errors import NotReadyError, UnknownNetworkError
+from api.errors import NotReadyError, ServiceError, UnknownNetworkError
 from api.networks import NetworkRegistry
+from api.server import listening_sockets
 from api.settings import Settings
-
-if TYPE_CHECKING:
-    from pathlib import Path
 
 
 def _metric(text: str, name: str, **labels: str) -> float:
@@ -254,3 +257,84 @@ def test_concurrent_matches_do_not_crash_the_worker(
     assert statuses == [200] * 240
     assert live.process.poll() is None
     assert client.get("/healthz").status_code == 200
+
+
+def test_each_worker_socket_gets_a_share_of_the_connections() -> None:
+    # one socket per worker on one port (SO_REUSEPORT): the kernel spreads connections over
+    # them, so keep-alive clients do not all land on the worker that woke first
+    sockets = listening_sockets("127.0.0.1", 0, 2, 64)
+    try:
+        port = sockets[0].getsockname()[1]
+        assert sockets[1].getsockname()[1] == port
+        clients = [socket.create_connection(("127.0.0.1", port)) for _ in range(32)]
+        accepted = []
+        for sock in sockets:
+            sock.setblocking(False)
+            count = 0
+            with contextlib.suppress(BlockingIOError):
+                while True:
+                    sock.accept()[0].close()
+                    count += 1
+            accepted.append(count)
+        for c in clients:
+            c.close()
+        assert sum(accepted) == 32
+        assert min(accepted) > 0, accepted  # all on one: 2 ** -31 by chance
+    finally:
+        for sock in sockets:
+            sock.close()
+
+
+def test_a_taken_port_is_a_clear_error() -> None:
+    taken = socket.socket()
+    taken.bind(("127.0.0.1", 0))
+    taken.listen()
+    try:
+        port = taken.getsockname()[1]
+        with pytest.raises(ServiceError, match=f"cannot listen on 127.0.0.1:{port}"):
+            listening_sockets("127.0.0.1", port, 2, 64)
+    finally:
+        taken.close()
+
+
+def _worker_pids(parent: int) -> set[int]:
+    """The ``mapmatch serve`` workers of a supervisor (its spawned children)."""
+    found = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        with contextlib.suppress(OSError):
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            cmdline = (stat.parent / "cmdline").read_bytes()
+            if int(fields[1]) == parent and b"spawn_main" in cmdline:
+                found.add(int(stat.parent.name))
+    return found
+
+
+def test_a_worker_that_dies_is_replaced_on_its_socket(
+    start_serve_process, cache_dir: Path, tmp_path: Path, trip, bodies
+) -> None:
+    args = ["--workers", "2", "--cache-dir", str(cache_dir), "--no-access-log"]
+    with start_serve_process(args, tmp_path / "workers.log") as server:
+        before = _worker_pids(server.process.pid)
+        assert len(before) == 2
+        victim = min(before)
+        os.kill(victim, signal.SIGKILL)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            now = _worker_pids(server.process.pid)
+            if len(now) == 2 and victim not in now:
+                break
+            time.sleep(0.2)
+        else:
+            pytest.fail(f"no worker replaced {victim}")
+        body = {"points": bodies.points(trip.trace)}
+        answered = 0
+        while answered < 16 and time.monotonic() < deadline:
+            # a new connection each: some land on the dead worker's socket, which its
+            # replacement serves (a socket without a worker would leave them hanging)
+            answer = httpx.post(server.base_url + "/v1/match", json=body, timeout=30)
+            if answer.status_code == 503 and answer.json()["error"]["code"] == "not_ready":
+                time.sleep(0.1)
+                continue
+            assert answer.status_code == 200, answer.text
+            answered += 1
+        assert answered == 16
