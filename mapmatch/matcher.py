@@ -122,7 +122,7 @@ def match(
         sigma = estimated_sigma_m(obs, cands)
         if sigma > 1.25 * config.sigma_m:  # noisier than assumed: look again, wider
             fixes = with_sigma(fixes, sigma, config)
-            obs, cands = observe(net, fixes, config)
+            obs, cands = observe(net, fixes, config, previous=(obs, cands))
     if len(cands) == 0:
         raise NoCandidatesError(trace.trace_id, float(fixes.radius_m.max()))
     clock = _lap(timings, "candidates", clock)

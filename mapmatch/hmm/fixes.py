@@ -232,9 +232,27 @@ def observations_of(fixes: Fixes, config: MatchConfig) -> Observations:
     )
 
 
-def observe(net: RoadNetwork, fixes: Fixes, config: MatchConfig) -> tuple[Observations, Candidates]:
-    """The HMM's observations of the fixes and their candidates."""
+def observe(
+    net: RoadNetwork,
+    fixes: Fixes,
+    config: MatchConfig,
+    previous: tuple[Observations, Candidates] | None = None,
+) -> tuple[Observations, Candidates]:
+    """
+    The HMM's observations of the fixes and their candidates.
+
+    Candidates depend on the observations' places and search radii only, so when
+    ``previous`` (an earlier :func:`observe` of the same trace, with another sigma) has the
+    same ones, its candidates are reused instead of searched again.
+    """
     obs = observations_of(fixes, config)
+    if previous is not None:
+        old = previous[0]
+        if all(
+            np.array_equal(a, b)
+            for a, b in ((obs.x, old.x), (obs.y, old.y), (obs.radius_m, old.radius_m))
+        ):
+            return obs, previous[1]
     return obs, find_candidates(net, obs.x, obs.y, obs.radius_m, config)
 
 
