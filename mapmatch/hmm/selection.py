@@ -23,6 +23,10 @@ if TYPE_CHECKING:
 __all__ = ["find_displaced", "find_off_road_runs", "find_outliers"]
 
 
+#: Fixes merged into one observation (a stop) that make it more than a stray when on a road.
+_BACKED_FIXES = 3
+
+
 def _params(config: MatchConfig) -> FloatArray:
     """The outlier parameters, in the order the kernels read them."""
     return np.array(
@@ -38,8 +42,8 @@ def _params(config: MatchConfig) -> FloatArray:
 
 
 @njit(cache=True, nogil=True)
-def _outliers(x, y, sigma, gaps, travel_m, slack_m, params):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """:func:`find_outliers` (``travel_m`` empty: no travel known)."""
+def _outliers(x, y, sigma, gaps, travel_m, slack_m, backed, params):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """:func:`find_outliers` (``travel_m`` empty: no travel known; ``backed``: never outliers)."""
     n = len(x)
     out = np.zeros(n, dtype=np.bool_)
     sigmas, max_gap, ratio = params[0], params[1], params[2]
@@ -60,7 +64,7 @@ def _outliers(x, y, sigma, gaps, travel_m, slack_m, params):  # type: ignore[no-
         # a good fix next to an outlier makes a detour too; blame only the local worst
         worst = detour[i] >= detour[i - 1] and detour[i] >= detour[i + 1]
         far = 0.5 * (d_prev + d_next) > sigmas * sigma[i]
-        out[i] = close and far and sharp and worst
+        out[i] = close and far and sharp and worst and not (len(backed) and backed[i])
     if len(travel_m):
         for end, inner, step in ((0, 1, 0), (n - 1, n - 2, n - 2)):
             gap = np.hypot(x[end] - x[inner], y[end] - y[inner])
@@ -120,6 +124,11 @@ def _displaced(ptr, distance, fix_time, first, stop, x, y, sigma, travel, params
     for k in range(n - 1):
         gaps[k] = fix_time[first[k + 1]] - fix_time[stop[k] - 1]
     outlier = _off_road(nearest, sigma, gaps, params)
+    # a stop's observation, several fixes that agree and lie on a road, is where the car
+    # was, not a stray: at a dead end's end a car that turns back makes the same spike
+    backed = np.zeros(n, dtype=np.bool_)
+    for k in range(n):
+        backed[k] = stop[k] - first[k] >= _BACKED_FIXES and nearest[k] <= 2.0 * sigma[k]
     odometer, speed_m, slack_m, lo, hi = travel
     for _ in range(3):
         m = 0
@@ -136,7 +145,7 @@ def _displaced(ptr, distance, fix_time, first, stop, x, y, sigma, travel, params
         gap = np.empty(max(m - 1, 0))
         for k in range(m - 1):
             gap[k] = fix_time[first[kept[k + 1]]] - fix_time[stop[kept[k]] - 1]
-        found = _outliers(x[kept], y[kept], sigma[kept], gap, travel_m, slack, params)
+        found = _outliers(x[kept], y[kept], sigma[kept], gap, travel_m, slack, backed[kept], params)
         if not found.any():
             break
         for k in range(m):
@@ -192,6 +201,7 @@ def find_outliers(
         np.ascontiguousarray(gaps, f8),
         np.ascontiguousarray(travel_m, f8),
         np.ascontiguousarray(slack_m, f8),
+        np.zeros(0, dtype=np.bool_),
         _params(config),
     )
     return np.asarray(out, dtype=bool)
@@ -239,7 +249,11 @@ def find_displaced(
     Short runs far from every road between observations on a road are displaced
     (:func:`find_off_road_runs`). Then each is compared with where its neighbours put it
     (:func:`find_outliers`); of two displaced ones in a row only the worse is caught at first,
-    so that test runs again without the ones found, up to three times.
+    so that test runs again without the ones found, up to three times. An observation merged
+    from at least ``_BACKED_FIXES`` fixes within 2 sigma of a road is never such an outlier:
+    several fixes agree on it, and a car that turns back at a dead end's end makes the same
+    spike (1 s / 5 m matrix, positions only: trips within 1 % 95 -> 96 %, |error| p95
+    0.97 -> 0.82 %).
     """
     out = _displaced(
         cands.ptr,
