@@ -92,6 +92,10 @@ def listening_sockets(host: str, port: int, count: int, backlog: int) -> list[so
     """
     ``count`` listening sockets on ``host:port`` with ``SO_REUSEPORT`` (port 0: one free port).
 
+    The port is first bound without ``SO_REUSEPORT``, so that a port another server holds
+    (with or without the option: a second ``mapmatch serve`` would otherwise share it
+    silently) is refused, then released and bound once per worker.
+
     Raises
     ------
     ServiceError
@@ -100,12 +104,16 @@ def listening_sockets(host: str, port: int, count: int, backlog: int) -> list[so
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
     out: list[socket.socket] = []
     try:
+        with socket.socket(family, socket.SOCK_STREAM) as probe:
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # past TIME_WAIT
+            probe.bind((host, port))
+            port = probe.getsockname()[1]
         for _ in range(count):
             sock = socket.socket(family, socket.SOCK_STREAM)
             out.append(sock)
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
-            sock.bind((host, out[0].getsockname()[1] if len(out) > 1 else port))
+            sock.bind((host, port))
             sock.listen(backlog)
             sock.set_inheritable(True)
     except OSError as exc:

@@ -295,6 +295,15 @@ def test_a_taken_port_is_a_clear_error() -> None:
             listening_sockets("127.0.0.1", port, 2, 64)
     finally:
         taken.close()
+    # a second server's SO_REUSEPORT sockets would share the port silently: refused too
+    first = listening_sockets("127.0.0.1", 0, 2, 64)
+    try:
+        port = first[0].getsockname()[1]
+        with pytest.raises(ServiceError, match=f"cannot listen on 127.0.0.1:{port}"):
+            listening_sockets("127.0.0.1", port, 2, 64)
+    finally:
+        for sock in first:
+            sock.close()
 
 
 def _worker_pids(parent: int) -> set[int]:
