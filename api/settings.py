@@ -102,7 +102,8 @@ class Settings(BaseSettings):
         le=256,
         description="Matches running at once in one process. Two keep a long trace from "
         "holding up the short ones; more only contend for the interpreter lock (16 clients, "
-        "100-point traces, 1 worker: 195 requests/s with 1 thread, 175 with 2, 154 with 4).",
+        "100-point traces, 1 worker: 154 requests/s with 4 threads, 175-205 with 2, 176-195 "
+        "with 1).",
     )
     max_queued: int = Field(
         default=64, ge=0, description="Matches waiting for a thread before 503 overloaded."
