@@ -21,7 +21,8 @@ def dask_cluster() -> Iterator[str]:
         threads_per_worker=1,
         processes=True,
         host="127.0.0.1",
-        dashboard_address=None,
+        dashboard_address=":0",  # any free port: None still serves HTTP on 8787, which
+        # a second test run on the machine may be binding at the same moment
         silence_logs=logging.ERROR,
     )
     try:
