@@ -5,9 +5,10 @@ its own, looks like a small move, forwards or backwards, and the only routes tha
 backward move are a U-turn or a loop round a block or a roundabout. So, as Newson & Krumm thin
 a stopped car's fixes, consecutive fixes within ``thinning_sigmas`` x sigma of their running
 centroid become one observation at that centroid: a stop is one state, not many noisy ones. A
-fix that leaves the group within seconds and is followed by one that comes back is a stray
-(left out of the centroid, placed on the path afterwards); at sparse sampling the same pattern
-is a car that drove somewhere and came back, and starts a group of its own. A moving car's
+fix that leaves the group and is followed by one that comes back, the whole excursion within
+``outlier_max_gap_s``, is a stray (left out of the centroid, placed on the path afterwards); a
+longer excursion (sparse sampling, or 5 s fixes into a dead end and out) is a car that drove
+somewhere and came back, and starts a group of its own. A moving car's
 fixes at 1 s merge in twos or threes, which smooths the noise without losing distance: the path
 still runs through every observation.
 """
@@ -126,8 +127,14 @@ class Observations:
         return len(self.first)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _soon(time_s, a, b, max_gap):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """Whether fix ``b`` comes at most ``max_gap`` after fix ``a`` (no times, NaN: it does)."""
+    return len(time_s) == 0 or not time_s[b] - time_s[a] > max_gap
+
+
 @njit(cache=True, nogil=True)
-def _group_kernel(x, y, radius, solo, quick):  # type: ignore[no-untyped-def]  # pragma: no cover
+def _group_kernel(x, y, radius, solo, quick, time_s, max_gap):  # type: ignore[no-untyped-def]  # pragma: no cover
     n = len(x)
     group = np.empty(n, dtype=np.int64)
     stray = np.zeros(n, dtype=np.bool_)
@@ -146,14 +153,21 @@ def _group_kernel(x, y, radius, solo, quick):  # type: ignore[no-untyped-def]  #
             count += 1.0
             group[i] = g
         elif quick[i] and (
-            (not solo[i + 1] and np.hypot(x[i + 1] - cx, y[i + 1] - cy) <= radius[i + 1])
+            (
+                not solo[i + 1]
+                and _soon(time_s, i - 1, i + 1, max_gap)
+                and np.hypot(x[i + 1] - cx, y[i + 1] - cy) <= radius[i + 1]
+            )
             or (
                 not solo[i + 1]
                 and not solo[i + 2]
+                and _soon(time_s, i - 1, i + 2, max_gap)
                 and np.hypot(x[i + 2] - cx, y[i + 2] - cy) <= radius[i + 2]
             )
         ):
-            group[i] = g  # it left and one of the next two fixes is back: a stray here
+            # it left and one of the next two fixes is back, the whole excursion within
+            # max_gap: a stray here; a longer one is a car that drove somewhere and back
+            group[i] = g
             stray[i] = True
         else:
             g += 1
@@ -203,8 +217,15 @@ def group_fixes(
         dt = np.diff(np.asarray(time_s, dtype=np.float64))
         longest = np.fmax(np.concatenate(([0.0], dt)), np.concatenate((dt, [0.0])))
         quick[:n] = ~(longest > config.outlier_max_gap_s)  # NaN (no times): quick
+    times = np.empty(0) if time_s is None else np.asarray(time_s, dtype=np.float64)
     group, stray = _group_kernel(
-        np.asarray(x, np.float64), np.asarray(y, np.float64), radius, solo, quick
+        np.asarray(x, np.float64),
+        np.asarray(y, np.float64),
+        radius,
+        solo,
+        quick,
+        times,
+        float(config.outlier_max_gap_s),
     )
     return np.asarray(group, dtype=np.int64), np.asarray(stray, dtype=bool)
 
@@ -261,7 +282,8 @@ def _merge_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compile
         group = np.arange(n)
         stray = np.zeros(n, dtype=np.bool_)
     else:
-        group, stray = _group_kernel(x, y, thinning * sigma, solo, quick)
+        times = time_s if len(time_s) == n else np.empty(0)
+        group, stray = _group_kernel(x, y, thinning * sigma, solo, quick, times, max_gap)
     count = group[-1] + 1 if n else 0
     first = np.empty(count, dtype=np.int64)
     stop = np.empty(count, dtype=np.int64)

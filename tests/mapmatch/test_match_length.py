@@ -158,3 +158,17 @@ def test_a_one_second_drive_into_a_dead_end_and_back_keeps_the_spur(
     score = score_geojson(mapmatch.match(trace, oakland_net).to_geojson(), trip.truth_record())
     assert abs(score.length_error) < 0.01
     assert score.uturns == score.true_uturns
+
+
+def test_an_excursion_longer_than_the_outlier_gap_is_a_drive_not_a_stray() -> None:
+    from mapmatch.config import MatchConfig
+    from mapmatch.hmm.observations import group_fixes
+
+    # a car standing at 0, two fixes 35-39 m away, back: at 1 s a multipath jump (strays of
+    # the stop), at 5 s fixes into a dead end's tip and out (a group of their own)
+    x = np.array([-20.0, 0.0, 1.0, 35.0, 39.0, 2.0, 25.0])
+    y, sigma = np.zeros(7), np.full(7, 5.0)
+    for interval, tip_is_stray in ((1.0, True), (5.0, False)):
+        group, stray = group_fixes(x, y, sigma, MatchConfig(), time_s=np.arange(7.0) * interval)
+        assert stray[3:5].tolist() == [tip_is_stray] * 2
+        assert (group[3] == group[2]) == tip_is_stray
