@@ -129,12 +129,16 @@ class Observations:
 
 @njit(cache=True, nogil=True, inline="always")
 def _soon(time_s, a, b, max_gap):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    """Whether fix ``b`` comes at most ``max_gap`` after fix ``a`` (no times, NaN: it does)."""
+    """
+    Whether fix ``b`` comes at most ``max_gap`` after fix ``a`` (no times, NaN: it does).
+
+    Times are sorted, so this also bounds every gap between the fixes in between.
+    """
     return len(time_s) == 0 or not time_s[b] - time_s[a] > max_gap
 
 
 @njit(cache=True, nogil=True)
-def _group_kernel(x, y, radius, solo, quick, time_s, max_gap):  # type: ignore[no-untyped-def]  # pragma: no cover
+def _group_kernel(x, y, radius, solo, time_s, max_gap):  # type: ignore[no-untyped-def]  # pragma: no cover
     n = len(x)
     group = np.empty(n, dtype=np.int64)
     stray = np.zeros(n, dtype=np.bool_)
@@ -152,18 +156,15 @@ def _group_kernel(x, y, radius, solo, quick, time_s, max_gap):  # type: ignore[n
             sy += y[i]
             count += 1.0
             group[i] = g
-        elif quick[i] and (
-            (
-                not solo[i + 1]
-                and _soon(time_s, i - 1, i + 1, max_gap)
-                and np.hypot(x[i + 1] - cx, y[i + 1] - cy) <= radius[i + 1]
-            )
-            or (
-                not solo[i + 1]
-                and not solo[i + 2]
-                and _soon(time_s, i - 1, i + 2, max_gap)
-                and np.hypot(x[i + 2] - cx, y[i + 2] - cy) <= radius[i + 2]
-            )
+        elif (
+            not solo[i + 1]
+            and _soon(time_s, i - 1, i + 1, max_gap)
+            and np.hypot(x[i + 1] - cx, y[i + 1] - cy) <= radius[i + 1]
+        ) or (
+            not solo[i + 1]
+            and not solo[i + 2]
+            and _soon(time_s, i - 1, i + 2, max_gap)
+            and np.hypot(x[i + 2] - cx, y[i + 2] - cy) <= radius[i + 2]
         ):
             # it left and one of the next two fixes is back, the whole excursion within
             # max_gap: a stray here; a longer one is a car that drove somewhere and back
@@ -204,26 +205,15 @@ def group_fixes(
     if config.thinning_sigmas <= 0:
         return np.arange(n, dtype=np.int64), np.zeros(n, dtype=bool)
     radius = config.thinning_sigmas * np.asarray(sigma_m, dtype=np.float64)
-    solo = np.zeros(n + 2, dtype=bool)  # two spare entries: the kernel looks two ahead
-    solo[[0, n - 1]] = True
-    if segment_starts is not None and len(segment_starts):
-        starts = np.asarray(segment_starts, dtype=np.int64)
-        solo[starts] = solo[starts - 1] = True
-    solo[n:] = True
+    starts = np.zeros(0, np.int64) if segment_starts is None else segment_starts
     # a stray is noise, seen between fixes close in time (an outlier, a multipath jump); at
     # sparse sampling a fix that leaves and comes back is a car that drove somewhere and back
-    quick = np.ones(n + 2, dtype=bool)
-    if time_s is not None and n > 1:
-        dt = np.diff(np.asarray(time_s, dtype=np.float64))
-        longest = np.fmax(np.concatenate(([0.0], dt)), np.concatenate((dt, [0.0])))
-        quick[:n] = ~(longest > config.outlier_max_gap_s)  # NaN (no times): quick
     times = np.empty(0) if time_s is None else np.asarray(time_s, dtype=np.float64)
     group, stray = _group_kernel(
         np.asarray(x, np.float64),
         np.asarray(y, np.float64),
         radius,
-        solo,
-        quick,
+        _solo(n, np.asarray(starts, dtype=np.int64)),
         times,
         float(config.outlier_max_gap_s),
     )
@@ -231,24 +221,17 @@ def group_fixes(
 
 
 @njit(cache=True, nogil=True)
-def _solo_quick(n, starts, time_s, max_gap):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """The fixes that stay observations of their own, and those close in time to both neighbours."""
+def _solo(n, starts):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """The fixes that stay observations of their own: the ends, and those of each segment."""
     solo = np.zeros(n + 2, dtype=np.bool_)  # two spare entries: the kernel looks two ahead
-    quick = np.ones(n + 2, dtype=np.bool_)
     if n == 0:
-        return solo, quick
+        return solo
     solo[0] = solo[n - 1] = True
     for s in starts:
         solo[s] = True
         solo[s - 1 if s > 0 else n + 1] = True
     solo[n] = solo[n + 1] = True
-    if n > 1 and len(time_s) == n:
-        for i in range(n):
-            before = time_s[i] - time_s[i - 1] if i > 0 else 0.0
-            after = time_s[i + 1] - time_s[i] if i < n - 1 else 0.0
-            longest = np.fmax(before, after)  # NaN (no times): quick
-            quick[i] = not longest > max_gap
-    return solo, quick
+    return solo
 
 
 @njit(cache=True, nogil=True)
@@ -274,7 +257,7 @@ def _merge_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compile
 ):  # fmt: skip
     """:func:`merge_fixes` in one pass (optional arrays absent when empty)."""
     n = len(x)
-    solo, quick = _solo_quick(n, starts, time_s, max_gap)
+    solo = _solo(n, starts)
     if n == 0:
         group = np.empty(0, dtype=np.int64)
         stray = np.zeros(0, dtype=np.bool_)
@@ -283,7 +266,7 @@ def _merge_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compile
         stray = np.zeros(n, dtype=np.bool_)
     else:
         times = time_s if len(time_s) == n else np.empty(0)
-        group, stray = _group_kernel(x, y, thinning * sigma, solo, quick, times, max_gap)
+        group, stray = _group_kernel(x, y, thinning * sigma, solo, times, max_gap)
     count = group[-1] + 1 if n else 0
     first = np.empty(count, dtype=np.int64)
     stop = np.empty(count, dtype=np.int64)
