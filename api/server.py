@@ -128,25 +128,21 @@ class WorkerSupervisor(Multiprocess):
     """
     uvicorn's multi-process supervisor, each worker on a listening socket of its own.
 
-    Worker ``i`` serves ``sockets[i]`` (:func:`listening_sockets`); a worker that dies or
-    hangs is replaced on the same socket, and ``SIGHUP`` replaces every worker in turn, each
-    new one on its predecessor's socket before the old one stops. The number of workers is
-    fixed (``SIGTTIN`` / ``SIGTTOU`` are refused): a socket without a worker would hold the
-    connections the kernel hands it.
+    Worker ``i`` serves ``sockets[i]`` (one per worker, :func:`listening_sockets`); a
+    worker that dies or hangs is replaced on the same socket, and ``SIGHUP`` replaces every
+    worker in turn, each new one on its predecessor's socket before the old one stops. The
+    number of workers is fixed (``SIGTTIN`` / ``SIGTTOU`` are refused): a socket without a
+    worker would hold the connections the kernel hands it.
     """
 
-    def __init__(self, config: uvicorn.Config, sockets: list[socket.socket]) -> None:
-        super().__init__(config, sockets=sockets)
-        self.worker_sockets = sockets
-
     def _started(self, index: int) -> Process:
-        process = Process(self.config, [self.worker_sockets[index]])
+        process = Process(self.config, [self.sockets[index]])
         process.start()
         return process
 
     def init_processes(self) -> None:
         """Start one worker per socket."""
-        self.processes = [self._started(i) for i in range(len(self.worker_sockets))]
+        self.processes = [self._started(i) for i in range(len(self.sockets))]
 
     def keep_subprocess_alive(self) -> None:
         """Replace a dead or hung worker on its socket (stop all if one could not start)."""
