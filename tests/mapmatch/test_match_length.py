@@ -13,6 +13,7 @@ import pytest
 
 import mapmatch
 import roadnets
+from mapmatch.evaluation.accuracy.conditions import condition_config
 from mapmatch.evaluation.scoring import score_geojson
 from mapmatch.evaluation.simulate import SimulationConfig, simulate_trips, strip_to_class
 from tests.mapmatch.toy import drive, load, trace_of, write_osm
@@ -124,7 +125,7 @@ def test_plain_gps_one_second_trips_stay_within_one_percent(
     source = None if extract == "monaco" else data_dir / extract
     net = roadnets.load(source, cache_dir=cache_dir)
     # the accuracy matrix's 1 s / 5 m condition and its first ten trips
-    cfg = SimulationConfig(interval_s=1.0, noise_m=5.0, outlier_rate=0.02, route_length_m=3000.0)
+    cfg = condition_config("1s-5m")
     errors = []
     for trip in simulate_trips(net, cfg, count=10, seed=1000):
         trace = strip_to_class(trip.trace, "positions")
@@ -151,8 +152,7 @@ def test_a_one_second_drive_into_a_dead_end_and_back_keeps_the_spur(
     # the accuracy matrix's 1 s / 5 m trips 22 and 27 of West Oakland turn back at a dead end's
     # end; the fixes near the end merge into one observation, which must not be taken for a
     # stray (it was: the match skipped the spur, 2 % short)
-    cfg = SimulationConfig(interval_s=1.0, noise_m=5.0, outlier_rate=0.02, route_length_m=3000.0)
-    trip = simulate_trips(oakland_net, cfg, count=1, seed=seed)[0]
+    trip = simulate_trips(oakland_net, condition_config("1s-5m"), count=1, seed=seed)[0]
     assert trip.uturns >= 1
     trace = strip_to_class(trip.trace, "positions")
     score = score_geojson(mapmatch.match(trace, oakland_net).to_geojson(), trip.truth_record())
