@@ -15,7 +15,8 @@ An executor may hold a ``shared`` object (a road network): it reaches every work
 
 Faults: a task whose worker process died (killed, out of memory) is run once more in a fresh
 pool (:meth:`ProcessExecutor.run`'s ``retry`` says how: the same task, or smaller ones);
-only a task lost twice is yielded with its :class:`WorkerLostError` error. Workers die with the
+a task lost again runs once more alone, and only a task that kills a pool on its own is
+yielded with its :class:`WorkerLostError` error. Workers die with the
 process that started them: each watches a pipe from its parent and exits when the parent is
 gone, killed or not, so no orphaned worker goes on matching and writing.
 """
@@ -35,7 +36,7 @@ from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 from mapmatch.errors import MapMatchError
 
 if TYPE_CHECKING:
-    from collections.abc import Callable, Iterator, Sequence
+    from collections.abc import Callable, Generator, Iterator, Sequence
     from multiprocessing.connection import Connection
     from multiprocessing.context import BaseContext
 
@@ -59,7 +60,7 @@ class SchedulerError(MapMatchError, OSError):
 
 
 class WorkerLostError(MapMatchError, RuntimeError):
-    """The worker process running a task died, and died again when the task was retried."""
+    """The worker process running a task died, and died again when the task ran alone."""
 
 
 def available_cores() -> int:
@@ -223,8 +224,9 @@ class ProcessExecutor:
         """
         Submit every task; yield each with its outcome as it completes.
 
-        Tasks lost with a dead worker are run once more in a fresh pool, after the others:
-        ``retry(task)`` gives what to run instead (default: the task itself; an empty list
+        Tasks lost with a dead worker are run once more in a fresh pool, after the others
+        (and those lost again, each alone in its own fresh pool): ``retry(task)`` gives
+        what to run instead (default: the task itself; an empty list
         when nothing of it is left to do).
         """
         yield from _retried(
@@ -233,7 +235,7 @@ class ProcessExecutor:
             retry,
             died=BrokenProcessPool,
             fresh=self._renew,
-            what="the worker process died twice running this task",
+            what="the worker process died each time it ran this task, the last time alone",
         )
 
     def _renew(self) -> None:
@@ -274,23 +276,45 @@ def _retried(
     Run ``tasks`` in a round; the ones lost with their worker (``died``) once more.
 
     ``fresh`` makes a new pool first; ``retry(task)`` says what to run instead of a lost
-    task. A task lost again is yielded with a :class:`WorkerLostError` (``what`` says why).
+    task. The lost tasks run again together; when that round breaks too, each task it lost
+    runs alone in a fresh pool, so an innocent task that only shared the pool with a
+    killer is not blamed. A task that kills a pool on its own is yielded with a
+    :class:`WorkerLostError` (``what`` says why).
     """
+    again = yield from _lost_in(round_(tasks), died)
+    if not again:
+        return
+    again = yield from _lost_in(_fresh_round(round_, again, retry, fresh), died)
+    for task in again:
+        for alone, outcome in _fresh_round(round_, [task], retry, fresh):
+            if isinstance(outcome, died):
+                outcome = WorkerLostError(f"{what} ({outcome})")
+            yield alone, outcome
+
+
+def _fresh_round(
+    round_: Callable[[Sequence[T]], Iterator[tuple[T, R | BaseException]]],
+    lost: Sequence[T],
+    retry: Callable[[T], Sequence[T]] | None,
+    fresh: Callable[[], None] | None,
+) -> Iterator[tuple[T, R | BaseException]]:
+    """A round of what is left to do of ``lost`` (``retry``), in a fresh pool."""
+    if fresh is not None:
+        fresh()
+    yield from round_([t for task in lost for t in (retry(task) if retry else [task])])
+
+
+def _lost_in(
+    outcomes: Iterator[tuple[T, R | BaseException]], died: type[BaseException]
+) -> Generator[tuple[T, R | BaseException], None, list[T]]:
+    """Yield the outcomes of a round; return the tasks lost with their worker."""
     lost: list[T] = []
-    for task, outcome in round_(tasks):
+    for task, outcome in outcomes:
         if isinstance(outcome, died):
             lost.append(task)
         else:
             yield task, outcome
-    if not lost:
-        return
-    if fresh is not None:
-        fresh()
-    again = [t for task in lost for t in (retry(task) if retry else [task])]
-    for task, outcome in round_(again):
-        if isinstance(outcome, died):
-            outcome = WorkerLostError(f"{what} ({outcome})")
-        yield task, outcome
+    return lost
 
 
 def _outcome(future: Future[R]) -> R | BaseException:

@@ -282,6 +282,7 @@ def test_files_and_folder_are_flushed_to_the_disk(
 def _dies_on_three(task: int, marker: str) -> int:
     if task == 3:
         os._exit(9)
+    time.sleep(0.2)  # the other tasks are still running when task 3 kills the pool
     return task * 10
 
 
