@@ -37,6 +37,7 @@ __all__ = [
     "route_pairs_kernel",
     "search_many",
     "table_records",
+    "within_search_bounds",
 ]
 
 
@@ -392,6 +393,38 @@ def table_records(sources, ptr, state, order, copy_ptr, copy_state, from_edge, t
             if found >= 0 and (best < 0 or found < best):
                 best = found
         out[i] = best
+    return out
+
+
+@njit(cache=True, nogil=True)
+def within_search_bounds(rec, from_edge, bounds, uturn_cost, distance, uturns, slot):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    Table records of pairs, less those a search with these bounds would not have settled.
+
+    A search runs per distinct ``from`` edge with the largest bound of its pairs
+    (:func:`group_pairs`) and settles a state when its key (length plus U-turn costs) fits,
+    so a record of a complete table counts only within that bound: the table then answers
+    exactly what the searches would. ``slot`` is :func:`group_pairs`' first scratch array
+    (-1 throughout, left so).
+    """
+    n = len(rec)
+    largest = np.empty(n)
+    n_src = 0
+    for i in range(n):
+        e = from_edge[i]
+        if slot[e] < 0:
+            slot[e] = n_src
+            largest[n_src] = bounds[i]
+            n_src += 1
+        else:
+            largest[slot[e]] = max(largest[slot[e]], bounds[i])
+    out = rec.copy()
+    for i in range(n):
+        r = rec[i]
+        if r >= 0 and distance[r] + uturn_cost * uturns[r] > largest[slot[from_edge[i]]]:
+            out[i] = -1
+    for i in range(n):
+        slot[from_edge[i]] = -1
     return out
 
 

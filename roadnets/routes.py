@@ -47,6 +47,7 @@ from roadnets.route_search import (
     route_pairs_kernel,
     search_many,
     table_records,
+    within_search_bounds,
 )
 from roadnets.turns import DEFAULT_UTURN_COST_M
 
@@ -471,7 +472,7 @@ def route_pairs(
     Each search runs with the largest bound of its pairs and stops as soon as all its ``to``
     edges are settled, so a pair may get a route longer than its own bound (never one worse
     than the shortest). ``table`` (a complete :class:`RouteTable` built with the same U-turn
-    cost and bounds at least these) answers instead of searching.
+    cost and bounds at least these) answers instead of searching, with the same routes.
 
     Parameters
     ----------
@@ -498,7 +499,15 @@ def route_pairs(
         raise ValueError(msg)
     bounds = np.broadcast_to(np.asarray(bounds_m, dtype=np.float64), a.shape)
     if table is not None:
-        rec = table.records(a, b)
+        rec = within_search_bounds(
+            table.records(a, b),
+            a,
+            np.ascontiguousarray(bounds),
+            table.uturn_cost_m,
+            table.distance_m,
+            table.uturns,
+            scratch(arrays, turns)[1][0],
+        )
         return EdgeRoutes(a, b, *_gather(table, rec), rec, table)
     cost = (uturn_cost_m, edge_cost, turn_cost)
     graph, uturn = _search_arrays(arrays, turns, cost)

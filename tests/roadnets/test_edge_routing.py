@@ -248,24 +248,27 @@ def test_pairs_get_the_routes_of_the_full_table(
     assert np.allclose(routes.time_s[both], time[both])
 
 
-def test_a_precomputed_route_table_answers_when_bounds_and_cost_fit(
+def test_a_precomputed_route_table_answers_as_the_searches_when_bounds_and_cost_fit(
     oakland_net: roadnets.RoadNetwork,
 ) -> None:
     a = oakland_net.arrays
     from_edges = np.repeat(np.arange(a.n_edges), 5)
     to_edges = np.tile(np.arange(5), a.n_edges)
-    fresh = oakland_net.edge_routes(from_edges, to_edges, 400.0)
+    bounds = np.random.default_rng(5).uniform(50.0, 400.0, len(from_edges))
+    fresh = oakland_net.edge_routes(from_edges, to_edges, bounds)
     try:
         table = oakland_net.precompute_routes(500.0)
         assert table.complete
-        answered = oakland_net.edge_routes(from_edges, to_edges, 400.0)
+        answered = oakland_net.edge_routes(from_edges, to_edges, bounds)
         assert answered.table is table
         assert oakland_net.edge_routes(from_edges, to_edges, 600.0).table is not table
         other = oakland_net.edge_routes(from_edges, to_edges, 400.0, uturn_cost_m=10.0)
         assert other.table is not table
+        # the same answers as the searches, routes beyond what they settle left out too
         near = np.isfinite(fresh.distance_m)
+        assert np.array_equal(near, np.isfinite(answered.distance_m))
         assert np.allclose(fresh.distance_m[near], answered.distance_m[near])
-        assert np.array_equal(fresh.uturns[near], answered.uturns[near])
+        assert np.array_equal(fresh.uturns, answered.uturns)
         i = int(np.flatnonzero(near & (fresh.distance_m > 0))[0])
         pair = (int(from_edges[i]), int(to_edges[i]))
         assert answered.edges(*pair) == fresh.edges(*pair)
@@ -306,9 +309,8 @@ def test_via_way_restrictions_of_a_real_extract_compile_and_survive_the_cache(
     assert cached.turns.n_states > a.n_edges  # restricted copies of the via edges
 
 
-def test_repeated_pairs_share_one_search_and_no_pairs_is_no_work(
-    default_net: roadnets.RoadNetwork,
-) -> None:
+def test_repeated_pairs_share_one_search_and_no_pairs_is_no_work(cache_dir: Path) -> None:
+    default_net = roadnets.load(cache_dir=cache_dir)  # its own: no route table attached
     a = default_net.arrays
     source = int(a.banned_in[0])
     targets = np.arange(a.n_edges)
