@@ -19,6 +19,12 @@ Bayfront from tests/data (via-way restrictions).
 3. Precomputed network-wide tables (``precompute_paths`` vs ``precompute_routes``): build
    time and size.
 4. Every returned route is checked against the banned pairs and banned sequences.
+5. The route table for sparse traces in the matcher (:mod:`roadnets.route_store`, on by
+   default): its build time and size, then ``mapmatch.match`` on simulated positions-only
+   trips per interval with and without it, interleaved, the median wall time of
+   ``--repeats`` passes: points/s both ways, their ratio, the trips' mean search bound
+   (the table answers a trace from ``TABLE_FROM_MEAN_BOUND_M`` on) and the trips whose match
+   differs (must be 0: the table answers what the searches would).
 """
 
 from __future__ import annotations
@@ -183,6 +189,65 @@ def bench_tables(net: roadnets.RoadNetwork, bound: float) -> str:
     )
 
 
+SPARSE_SETS = [(1.0, 5.0), (5.0, 8.0), (10.0, 10.0), (15.0, 10.0), (30.0, 20.0)]
+
+
+def bench_sparse_table(net: roadnets.RoadNetwork, traces: int, repeats: int) -> list[str]:
+    """Rows of section 5 for one network (the table is built here, in memory)."""
+    from mapmatch.evaluation.accuracy.conditions import columns_of
+    from mapmatch.evaluation.simulate import with_columns
+    from mapmatch.hmm.routes import route_search_bounds
+    from mapmatch.hmm.transition import TABLE_FROM_MEAN_BOUND_M
+    from mapmatch.matcher import match
+    from roadnets.route_store import ROUTE_TABLE_BOUND_M, build_table, table_bytes
+    from roadnets.turns import DEFAULT_UTURN_COST_M
+
+    started = time.perf_counter()
+    table = build_table(
+        net.arrays, net.turns, ROUTE_TABLE_BOUND_M, uturn_cost_m=DEFAULT_UTURN_COST_M
+    )
+    build_s = time.perf_counter() - started
+    net.route_table_budget_mb = 0  # no background table of its own during the runs
+    rows = []
+    for interval, noise in SPARSE_SETS:
+        cfg = SimulationConfig(interval_s=interval, noise_m=noise)
+        simulated = simulate_trips(net, cfg, count=traces, seed=11)
+        trips = [with_columns(trip.trace, columns_of("positions")) for trip in simulated]
+        points = sum(len(t) for t in trips)
+        bounds = []
+        for t in trips:
+            x, y = net.project(t.lon, t.lat)
+            step = np.hypot(np.diff(x), np.diff(y))
+            bounds.append(route_search_bounds(step, np.diff(t.time_s), MatchConfig()).mean())
+        wall: dict[bool, list[float]] = {False: [], True: []}
+        results: dict[bool, list[tuple[float, list[int]]]] = {}
+        for _ in range(repeats):
+            for use in (False, True):
+                net.precomputed_routes = table if use else None
+                match(trips[0], net)
+                started = time.perf_counter()
+                out = [match(t, net) for t in trips]
+                wall[use].append(time.perf_counter() - started)
+                results[use] = [
+                    (r.matched_length_m, [e for s in r.segments for e in s.edge.tolist()])
+                    for r in out
+                ]
+        net.precomputed_routes = None
+        searched, answered = (float(np.median(wall[u])) for u in (False, True))
+        differ = sum(a != b for a, b in zip(results[False], results[True], strict=True))
+        rows.append(
+            f"| {net.network_id} | {interval:g} s / {noise:g} m | {points:,} | "
+            f"{np.mean(bounds):.0f} | {points / searched:,.0f} | {points / answered:,.0f} | "
+            f"{searched / answered:.2f} | {differ} |"
+        )
+    head = (
+        f"- {net.network_id}: table of routes within {ROUTE_TABLE_BOUND_M:g} m built in "
+        f"{build_s:.2f} s, {table_bytes(table) / 1e6:,.0f} MB; the matcher uses it from a "
+        f"mean bound of {TABLE_FROM_MEAN_BOUND_M:g} m"
+    )
+    return [head, *rows]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--extract", action="append", type=Path, default=None)
@@ -228,6 +293,15 @@ def main() -> None:
     for net in nets:
         for bound in args.table_bound or [500.0, 1000.0]:
             print(bench_tables(net, bound), flush=True)
+    print(f"\nRoute table for sparse traces, median wall time of {args.repeats} passes:\n")
+    rows = [bench_sparse_table(net, args.traces, args.repeats) for net in nets]
+    print("\n".join(r[0] for r in rows))
+    print(
+        "\n| network | set | points | mean bound m | searched points/s | table points/s "
+        "| table / searched | trips differing |"
+    )
+    print("|---|---|---:|---:|---:|---:|---:|---:|")
+    print("\n".join(line for r in rows for line in r[1:]))
 
 
 if __name__ == "__main__":

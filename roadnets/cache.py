@@ -22,7 +22,15 @@ from typing import Any
 from roadnets.arrays import NetworkArrays
 from roadnets.errors import CacheError
 
-__all__ = ["FORMAT_VERSION", "default_cache_dir", "entry_folder", "read_entry", "write_entry"]
+__all__ = [
+    "FORMAT_VERSION",
+    "default_cache_dir",
+    "entry_folder",
+    "file_checksum",
+    "put_in_place",
+    "read_entry",
+    "write_entry",
+]
 
 #: Bump whenever the compiled arrays change meaning; old entries are then ignored.
 FORMAT_VERSION = 6
@@ -73,12 +81,32 @@ def ensure_writable(cache_dir: Path) -> None:
         raise CacheError(str(cache_dir), exc.strerror or str(exc)) from exc
 
 
-def _checksum(path: Path) -> str:
+def file_checksum(path: Path) -> str:
+    """BLAKE2b (16 bytes) of a file's content, hex: the check of a cache file's integrity."""
     digest = hashlib.blake2b(digest_size=16)
     with path.open("rb") as handle:
         for block in iter(lambda: handle.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()
+
+
+def put_in_place(tmp: Path, folder: Path) -> None:
+    """
+    Rename a finished temporary folder to ``folder``; one another process finished first wins.
+
+    A ``folder`` without its ``meta.json`` (a leftover) is replaced.
+
+    Raises
+    ------
+    OSError
+        The rename fails.
+    """
+    try:
+        tmp.rename(folder)
+    except OSError:
+        if not (folder / "meta.json").exists():  # not another process that won the race
+            shutil.rmtree(folder, ignore_errors=True)
+            tmp.rename(folder)
 
 
 def write_entry(folder: Path, arrays: NetworkArrays, meta: dict[str, Any]) -> None:
@@ -101,15 +129,10 @@ def write_entry(folder: Path, arrays: NetworkArrays, meta: dict[str, Any]) -> No
             **meta,
             "format_version": FORMAT_VERSION,
             "layout": layout,
-            "checksum": _checksum(tmp / ARRAYS_FILE),
+            "checksum": file_checksum(tmp / ARRAYS_FILE),
         }
         (tmp / "meta.json").write_text(json.dumps(payload), encoding="utf-8")
-        try:
-            tmp.rename(folder)
-        except OSError:
-            if not (folder / "meta.json").exists():  # not another process that won the race
-                shutil.rmtree(folder, ignore_errors=True)
-                tmp.rename(folder)
+        put_in_place(tmp, folder)
     except OSError as exc:
         raise CacheError(str(parent), exc.strerror or str(exc)) from exc
     finally:
@@ -126,7 +149,7 @@ def read_entry(folder: Path) -> tuple[NetworkArrays, dict[str, Any]] | None:
         if meta.get("format_version") != FORMAT_VERSION:
             msg = "format version differs"
             raise ValueError(msg)
-        if _checksum(folder / ARRAYS_FILE) != meta["checksum"]:
+        if file_checksum(folder / ARRAYS_FILE) != meta["checksum"]:
             msg = f"checksum of {ARRAYS_FILE} differs"
             raise ValueError(msg)
         arrays = NetworkArrays.load(folder / ARRAYS_FILE, meta["layout"])

@@ -18,6 +18,7 @@ import numpy.typing as npt
 
 from roadnets.drivable import ROAD_CLASSES
 from roadnets.names import WayNames
+from roadnets.route_store import DEFAULT_BUDGET_MB, TableKeeper
 from roadnets.spatial import (
     EdgeHits,
     PackedTree,
@@ -111,7 +112,11 @@ class RoadNetwork:
     precomputed: PathTable | None = None
     precomputed_bound_m: float = 0.0
     precomputed_routes: RouteTable | None = None
+    #: Largest route table for sparse traces made without being asked, MB (0: never); see
+    #: :meth:`sparse_route_table`.
+    route_table_budget_mb: float = DEFAULT_BUDGET_MB
     _rtree_lock: threading.Lock = field(default_factory=threading.Lock)
+    _route_keeper: TableKeeper = field(default_factory=TableKeeper)
 
     def __repr__(self) -> str:
         a = self.arrays
@@ -124,12 +129,20 @@ class RoadNetwork:
         )
 
     def __reduce__(self) -> tuple[Callable[[dict[str, Any]], RoadNetwork], tuple[dict[str, Any]]]:
-        keep: tuple[str, ...] = ("precomputed", "precomputed_bound_m", "precomputed_routes")
+        keep: tuple[str, ...] = (
+            "precomputed",
+            "precomputed_bound_m",
+            "precomputed_routes",
+            "route_table_budget_mb",
+        )
         if self.cache_entry is not None:
             keep = ("network_id", "source", "source_sha256", "cache_entry", *keep)
         else:
-            keep = tuple(f.name for f in dataclasses.fields(self) if f.name != "_rtree_lock")
-        return _unpickle, ({name: getattr(self, name) for name in keep},)
+            keep = tuple(f.name for f in dataclasses.fields(self) if not f.name.startswith("_"))
+        state = {name: getattr(self, name) for name in keep}
+        if self._route_keeper.stored:  # the other process maps the cache entry's own file
+            state["precomputed_routes"] = None
+        return _unpickle, (state,)
 
     @cached_property
     def way_names(self) -> WayNames:
@@ -330,6 +343,34 @@ class RoadNetwork:
         self.precomputed_routes = table
         return table
 
+    def sparse_route_table(self) -> RouteTable | None:
+        """
+        The route table sparse traces are matched with, looked for once per process.
+
+        The one :meth:`precompute_routes` made; else the one stored in the cache entry
+        (memory-mapped); else one of every edge's routes within
+        :data:`~roadnets.route_store.ROUTE_TABLE_BOUND_M` is built when its estimated size
+        fits :attr:`route_table_budget_mb` (and stored in the cache entry). ``None`` when
+        it does not fit; :attr:`route_table_note` says why. The matcher asks for it in the
+        background (:meth:`request_route_table`) on its first sparse trace; ``mapmatch
+        network build`` asks here, so that the first sparse match finds it ready.
+        """
+        return self._route_keeper.ensure(self)
+
+    def request_route_table(self) -> None:
+        """Start :meth:`sparse_route_table` in a background thread (once) and return."""
+        self._route_keeper.request(self)
+
+    @property
+    def route_table_requested(self) -> bool:
+        """Whether this process has looked for the sparse-trace route table (or is looking)."""
+        return self._route_keeper.started
+
+    @property
+    def route_table_note(self) -> str:
+        """What became of the sparse-trace route table (read, built, too large ...)."""
+        return self._route_keeper.note
+
     @cached_property
     def _vertex_position(self) -> FloatArray:
         """Each vertex's distance along the concatenation of all edges (a monotone key)."""
@@ -500,4 +541,5 @@ def _unpickle(state: dict[str, Any]) -> RoadNetwork:
     net = reopen(state["network_id"], state["source"], state["source_sha256"], state["cache_entry"])
     net.precomputed, net.precomputed_bound_m = state["precomputed"], state["precomputed_bound_m"]
     net.precomputed_routes = state["precomputed_routes"]
+    net.route_table_budget_mb = state["route_table_budget_mb"]
     return net

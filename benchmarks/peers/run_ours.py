@@ -1,6 +1,8 @@
 """Our matcher as a "peer" (project venv), under the same job, warm-up and timing rules.
 
-``roadnets.load`` is the timed load (the compiled network cache counts as a normal second load);
+``roadnets.load`` is the timed load (the compiled network cache counts as a normal second load),
+with the route table for sparse traces that ``mapmatch network build`` stores in the cache
+(read, or built the first time, as FMM's UBODT is built once and cached);
 traces are read with ``mapmatch.read_traces`` (not timed, like the peers' input preparation);
 the timed call is ``mapmatch.match`` followed by ``mapmatch.export.geojson_bytes(result)``, the
 GeoJSON document a user gets (what ``POST /v1/match`` answers and ``mapmatch match`` writes), as
@@ -38,6 +40,7 @@ def load(job: dict[str, Any]) -> dict[str, Any]:
     import roadnets
 
     net = roadnets.load(job["extract"])
+    net.sparse_route_table()  # read from the cache entry, as `mapmatch network build` left it
     traces = {t.trace_id: t for t in mapmatch.read_traces(job["traces_csv"])}
     kw = config_kwargs(job["params"])
     return {"net": net, "traces": traces, "config": mapmatch.MatchConfig(**kw), "kw": kw}
@@ -71,8 +74,8 @@ def geometry(ctx: dict[str, Any], tr: TracePoints, raw: Any) -> Geometry:
 
 
 def settings(ctx: dict[str, Any]) -> dict[str, Any]:
-    """The MatchConfig fields we set."""
-    return {"MatchConfig": ctx["kw"]}
+    """The MatchConfig fields we set, and the route table sparse traces were matched with."""
+    return {"MatchConfig": ctx["kw"], "route_table": ctx["net"].route_table_note}
 
 
 def main() -> int:

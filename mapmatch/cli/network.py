@@ -2,16 +2,27 @@
 
 from __future__ import annotations
 
+import argparse
 import json
+import math
 import time
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import roadnets
-
-if TYPE_CHECKING:
-    import argparse
+from roadnets.route_store import DEFAULT_BUDGET_MB, table_bytes
 
 __all__ = ["add_parser", "run"]
+
+
+def _megabytes(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not (value >= 0 and math.isfinite(value)):
+        msg = f"must be a number of MB >= 0 (got {text!r})"
+        raise argparse.ArgumentTypeError(msg)
+    return value
 
 
 def add_parser(sub: Any) -> None:
@@ -27,6 +38,14 @@ def add_parser(sub: Any) -> None:
     )
     parser.add_argument("--cache-dir", default=None, help="folder of compiled networks")
     parser.add_argument("--json", action="store_true", help="print JSON instead of text")
+    parser.add_argument(
+        "--route-table-mb",
+        type=_megabytes,
+        default=DEFAULT_BUDGET_MB,
+        metavar="MB",
+        help="build: also build the route table sparse traces are matched with, when its "
+        f"estimated size fits this many MB (default {DEFAULT_BUDGET_MB:.0f}; 0: none)",
+    )
     parser.set_defaults(run=run)
 
 
@@ -39,7 +58,9 @@ def run(args: argparse.Namespace) -> int:
     (:func:`roadnets.warm_kernels`) and the matcher's (a short match,
     :mod:`mapmatch.batch.warm`), reported on lines of their own: compiling them happens once
     per install (about a minute on a fresh one), not once per network; later processes load
-    them from numba's on-disk cache in a fraction of a second.
+    them from numba's on-disk cache in a fraction of a second. It then builds the route table
+    sparse traces are matched with into the cache entry when it fits ``--route-table-mb``
+    (:meth:`roadnets.RoadNetwork.sparse_route_table`).
     """
     started = time.perf_counter()
     net = roadnets.load(args.source, cache_dir=args.cache_dir)
@@ -52,6 +73,10 @@ def run(args: argparse.Namespace) -> int:
         from mapmatch.batch import warm  # its import matches once: the matcher's kernels
 
         matcher_s = warm.WARMUP_S
+        net.route_table_budget_mb = args.route_table_mb
+        table_started = time.perf_counter()
+        table = net.sparse_route_table()
+        table_s = time.perf_counter() - table_started
     info = net.info()
     elapsed = time.perf_counter() - started
     if args.json:
@@ -79,6 +104,11 @@ def run(args: argparse.Namespace) -> int:
                 "compiled": kernels.compiled,
                 "loaded": kernels.loaded,
                 "matcher_s": round(matcher_s, 4),
+            }
+            payload["route_table"] = {
+                "note": net.route_table_note,
+                "bytes": table_bytes(table) if table is not None else 0,
+                "seconds": round(table_s, 4),
             }
         print(json.dumps(payload, indent=2))
         return 0
@@ -108,5 +138,6 @@ def run(args: argparse.Namespace) -> int:
     if kernels is not None:
         lines.append(f"kernels      {kernels.describe()}")
         lines.append(f"matcher      kernels ready in {matcher_s:.2f} s (a short match)")
+        lines.append(f"route table  {net.route_table_note} ({table_s:.2f} s)")
     print("\n".join(lines))
     return 0

@@ -50,7 +50,12 @@ from mapmatch.hmm.routes import (
     held_behind,
     uturn_route,
 )
-from roadnets.route_search import gather, route_pairs_kernel, table_records
+from roadnets.route_search import (
+    gather,
+    route_pairs_kernel,
+    table_records,
+    within_search_bounds,
+)
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -60,9 +65,11 @@ if TYPE_CHECKING:
     from roadnets import EdgeRoutes, RoadNetwork
 
 __all__ = [
+    "TABLE_FROM_MEAN_BOUND_M",
     "log_transition",
     "route_inputs",
     "routes_found",
+    "table_pays",
     "transition_score",
     "transitions",
     "transitions_kernel",
@@ -208,10 +215,33 @@ def uturn_penalties(
     return np.asarray(out, dtype=np.float64).reshape(shape)
 
 
+#: Mean search bound (m) of a trace's pairs from which the precomputed route table answers:
+#: below it the few short searches of a dense trace (shared by its steps) beat the table's
+#: lookups, above it the table is faster. Andorra and Monaco, 2000 m table, one thread,
+#: table against searches by the trips' mean bound: 340 m (1 s) x0.73-0.83, 390 m (5 s)
+#: x0.94-1.02, 450 m (10 s) x1.15-1.21, 510 m (15 s) x1.23-1.40, 680 m (30 s) x1.38-1.87.
+TABLE_FROM_MEAN_BOUND_M = 400.0
+
+
+def table_pays(bounds_m: FloatArray) -> bool:
+    """
+    Whether routes searched with these bounds are answered faster from the route table.
+
+    Examples
+    --------
+    >>> table_pays(np.array([320.0, 340.0])), table_pays(np.array([600.0, 900.0]))
+    (False, True)
+    """
+    return len(bounds_m) > 0 and float(np.mean(bounds_m)) >= TABLE_FROM_MEAN_BOUND_M
+
+
 @njit(cache=True, nogil=True)
 def _pair_routes(graph, ws, scratch, uturn_cost_m, table, from_edge, to_edge, bounds):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
-    Routes of edge pairs: from the precomputed table when every bound fits in it, else searched.
+    Routes of edge pairs: from the precomputed table when it pays, else searched.
+
+    The table answers when every bound fits in it and they are long enough on average
+    (:data:`TABLE_FROM_MEAN_BOUND_M`).
 
     Returns whether the table answered, the searches' output of
     :func:`~roadnets.route_search.route_pairs_kernel` (empty then) and per pair its record,
@@ -221,12 +251,18 @@ def _pair_routes(graph, ws, scratch, uturn_cost_m, table, from_edge, to_edge, bo
         table
     )
     fits = t_bound > -np.inf  # no table (bound -inf) never fits, even with no pairs
+    total = 0.0
     for k in range(len(bounds)):
         fits = fits and bounds[k] <= t_bound
+        total += bounds[k]
+    fits = fits and total >= TABLE_FROM_MEAN_BOUND_M * len(bounds)
     if fits:
-        rec = table_records(
-            t_sources, t_ptr, t_state, t_order, copy_ptr, copy_state, from_edge, to_edge
-        )
+        rec = within_search_bounds(
+            table_records(
+                t_sources, t_ptr, t_state, t_order, copy_ptr, copy_state, from_edge, to_edge
+            ),
+            from_edge, bounds, uturn_cost_m, t_dist, t_turns, scratch[0],
+        )  # fmt: skip
         dist, time, turns = gather(rec, t_dist, t_time, t_turns)
         e_i, e_f = np.empty(0, dtype=np.int64), np.empty(0)
         searched = (

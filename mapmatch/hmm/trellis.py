@@ -17,9 +17,9 @@ from mapmatch.hmm.candidates import Candidates
 from mapmatch.hmm.emission import distance_score, heading_score, speed_weight
 from mapmatch.hmm.observations import between_kernel, travel_arrays
 from mapmatch.hmm.params import P_CANDIDATE_MARGIN, P_MIN_LOG_TRANSITION, model_params
-from mapmatch.hmm.routes import pairs_kernel, search_bound
+from mapmatch.hmm.routes import pairs_kernel, route_search_bounds, search_bound
 from mapmatch.hmm.solution import Solution
-from mapmatch.hmm.transition import route_inputs, routes_found, transitions_kernel
+from mapmatch.hmm.transition import route_inputs, routes_found, table_pays, transitions_kernel
 from mapmatch.hmm.viterbi import _posterior_kernel, _viterbi_kernel
 
 if TYPE_CHECKING:
@@ -173,6 +173,10 @@ def solve(
 ) -> Solution:
     """Score the trellis over the ``used`` fixes and find the best sequence."""
     c = all_cands
+    if not net.route_table_requested and len(used) > 1:
+        x, y, t = fixes.x[used], fixes.y[used], fixes.time_s[used]
+        if table_pays(route_search_bounds(np.hypot(np.diff(x), np.diff(y)), np.diff(t), config)):
+            net.request_route_table()  # a sparse trace: the next ones may use the table
     out = solve_kernel(
         route_inputs(net),
         net.arrays.edge_speed_mps,

@@ -8,12 +8,14 @@ import json
 import os
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import roadnets
+from roadnets.route_store import THREAD_NAME
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -32,6 +34,9 @@ def _grid_city(path: Path, size: int) -> Path:
 
 
 def _tracked() -> int:
+    for thread in threading.enumerate():  # other tests' networks building their route tables
+        if thread.name == THREAD_NAME:
+            thread.join()
     gc.collect()
     return len(gc.get_objects())
 
@@ -188,8 +193,10 @@ def test_network_build_on_a_cached_network_says_so(
     assert "(parsed, compiled, indexed)" in first
     assert "kernels      " in first
     assert "matcher      kernels ready in " in first  # the matcher's kernels warmed too
+    assert "route table  built and stored in the cache entry: " in first
     assert main(args) == 0
     again = capsys.readouterr().out
+    assert "route table  read from the cache entry: " in again
     build = next(line for line in again.splitlines() if line.startswith("build"))
     assert build.startswith("build        already cached in ")
     assert "parsed" not in again
@@ -199,3 +206,7 @@ def test_network_build_on_a_cached_network_says_so(
     assert payload["build_s"] is None
     assert payload["kernels"]["compiled"] == 0  # compiled once, by the first build
     assert payload["cache_entry"].startswith(str(tmp_path))
+    assert payload["route_table"]["bytes"] > 0
+    with pytest.raises(SystemExit):
+        main([*args, "--route-table-mb", "-1"])
+    assert "--route-table-mb: must be a number of MB >= 0 (got '-1')" in capsys.readouterr().err

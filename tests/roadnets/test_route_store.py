@@ -1,0 +1,102 @@
+"""The route table kept for sparse traces: its budget, its cache files, its background build."""
+
+from __future__ import annotations
+
+import logging
+import pickle
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+import roadnets
+from roadnets.route_store import ROUTE_TABLE_BOUND_M, ROUTES_FOLDER
+
+if TYPE_CHECKING:
+    import pytest
+
+OAKLAND = Path(__file__).parents[1] / "data" / "west-oakland_us.osm.bz2"
+
+
+def _pairs(net: roadnets.RoadNetwork) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(3)
+    n = net.arrays.n_edges
+    return rng.integers(0, n, 500), rng.integers(0, n, 500)
+
+
+def test_the_table_is_built_within_budget_stored_in_the_entry_and_read_back(
+    tmp_path: Path,
+) -> None:
+    net = roadnets.load(OAKLAND, cache_dir=tmp_path)
+    assert net.route_table_note == "not looked for yet"
+    table = net.sparse_route_table()
+    assert table is not None
+    assert net.route_table_note.startswith("built and stored in the cache entry: ")
+    assert float(table.bounds_m.min()) == ROUTE_TABLE_BOUND_M
+    assert net.cache_entry is not None
+    assert (Path(net.cache_entry) / ROUTES_FOLDER / "meta.json").exists()
+
+    again = roadnets.load(OAKLAND, cache_dir=tmp_path)
+    read = again.sparse_route_table()
+    assert read is not None
+    assert again.route_table_note.startswith("read from the cache entry: ")
+    a, b = _pairs(net)
+    assert np.array_equal(read.records(a, b), table.records(a, b))
+    assert np.array_equal(read.lookup(a, b)[0], table.lookup(a, b)[0])
+
+    # a worker gets the entry's path, not the table, and maps the same file
+    blob = pickle.dumps(again)
+    assert len(blob) < 10_000
+    worker = pickle.loads(blob)
+    assert worker.precomputed_routes is None
+    assert worker.sparse_route_table() is not None
+    assert worker.route_table_note.startswith("read from the cache entry: ")
+
+
+def test_a_table_over_the_budget_is_not_built_and_the_note_says_why(tmp_path: Path) -> None:
+    net = roadnets.load(OAKLAND, cache_dir=tmp_path)
+    net.route_table_budget_mb = 0.01
+    assert net.sparse_route_table() is None
+    assert "MB, over the 0.01 MB budget" in net.route_table_note
+    assert net.cache_entry is not None
+    assert not (Path(net.cache_entry) / ROUTES_FOLDER).exists()
+
+    off = roadnets.load(OAKLAND, cache_dir=tmp_path)
+    off.route_table_budget_mb = 0
+    assert off.sparse_route_table() is None
+    assert off.route_table_note == "none: route_table_budget_mb is 0"
+
+
+def test_a_table_made_by_precompute_routes_is_kept(tmp_path: Path) -> None:
+    net = roadnets.load(OAKLAND, cache_dir=tmp_path)
+    own = net.precompute_routes(300.0)
+    assert net.sparse_route_table() is own
+    assert net.route_table_note == "given (precompute_routes)"
+
+
+def test_without_a_cache_entry_the_table_is_built_in_memory() -> None:
+    net = roadnets.load(OAKLAND, use_cache=False)
+    assert net.sparse_route_table() is not None
+    assert net.route_table_note.startswith("built (no cache entry to keep it): ")
+
+
+def test_a_corrupt_stored_table_is_removed_and_built_again(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    net = roadnets.load(OAKLAND, cache_dir=tmp_path)
+    table = net.sparse_route_table()
+    assert table is not None
+    assert net.cache_entry is not None
+    a, b = _pairs(net)
+    expected = table.records(a, b)  # before the file under its mapping is overwritten
+    state = Path(net.cache_entry) / ROUTES_FOLDER / "state.npy"
+    raw = bytearray(state.read_bytes())
+    raw[-1] ^= 0xFF
+    state.write_bytes(bytes(raw))
+    again = roadnets.load(OAKLAND, cache_dir=tmp_path)
+    with caplog.at_level(logging.WARNING, logger="roadnets"):
+        rebuilt = again.sparse_route_table()
+    assert "checksum of state.npy differs" in caplog.text
+    assert rebuilt is not None
+    assert again.route_table_note.startswith("built and stored in the cache entry: ")
+    assert np.array_equal(rebuilt.records(a, b), expected)
