@@ -86,7 +86,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     """
     settings = settings or Settings()
     configure_logging()
-    networks = NetworkRegistry(settings.networks, settings.cache_dir)
+    networks = NetworkRegistry(settings.networks, settings.cache_dir, settings.route_table_mb)
     service = MatchService(networks, settings)
     metrics = ServiceMetrics()
 

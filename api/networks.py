@@ -46,11 +46,17 @@ class NetworkRegistry:
         OSM extracts; empty = the embedded default network.
     cache_dir
         Folder of compiled networks; ``None`` = roadnets' default.
+    route_table_mb
+        Budget of each network's route table for sparse traces, read or built at load
+        (:meth:`roadnets.RoadNetwork.sparse_route_table`); 0: none.
     """
 
-    def __init__(self, sources: Sequence[str], cache_dir: str | None) -> None:
+    def __init__(
+        self, sources: Sequence[str], cache_dir: str | None, route_table_mb: float = 0.0
+    ) -> None:
         self._sources: tuple[str | None, ...] = tuple(sources) or (None,)
         self._cache_dir = cache_dir
+        self._route_table_mb = route_table_mb
         self._nets: dict[str, RoadNetwork] = {}
         self._infos: dict[str, NetworkInfo] = {}
         self._density: dict[str, CandidateDensity] = {}
@@ -86,6 +92,9 @@ class NetworkRegistry:
                         "rename one of the files"
                     )
                     raise RoadNetworkError(msg)
+                net.route_table_budget_mb = self._route_table_mb
+                net.sparse_route_table()  # now, not in the background while serving
+                _log.info("network %s: route table %s", net.network_id, net.route_table_note)
                 _warm_up(net)
                 self._nets[net.network_id] = net
                 self._infos[net.network_id] = net.info()
@@ -156,6 +165,7 @@ class NetworkRegistry:
                     "nodes": info.nodes,
                     "edges": info.edges,
                     "road_km": round(info.road_km, 3),
+                    "route_table": self._nets[network_id].route_table_note,
                     "default": network_id == self._default,
                 }
             )

@@ -515,6 +515,10 @@ class NetworkOut(BaseModel):
     nodes: int = Field(description="Graph nodes.")
     edges: int = Field(description="Directed edges.")
     road_km: float = Field(description="Road length, each two-way road counted once, km.")
+    route_table: str = Field(
+        description="What became of its route table for sparse traces (read from the cache, "
+        "built, or none and why; `MAPMATCH_ROUTE_TABLE_MB`)."
+    )
     default: bool = Field(description="Used when a request names no network.")
 
 

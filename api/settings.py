@@ -19,6 +19,8 @@ variable                        meaning
 ``MAPMATCH_MAX_QUEUED``         matches waiting for a thread before 503 ``overloaded`` (64)
 ``MAPMATCH_MAX_DECOMPRESSED_BYTES``  largest body after gzip, bytes (40 MB)
 ``MAPMATCH_MAX_COLUMNS``        most columns of a CSV body (256)
+``MAPMATCH_ROUTE_TABLE_MB``     largest route table for sparse traces a network keeps, read
+                                from the cache or built at load (256 MB; 0 = none)
 ``MAPMATCH_MEMORY_BUDGET_MB``   most memory one match may need, by the cost model of
                                 :mod:`api.costs` (2048 MB; more is 413 ``over_budget``)
 ``MAPMATCH_HEADER_TIMEOUT_S``   seconds a connection may take to send a request's headers, and
@@ -52,6 +54,7 @@ from pydantic import Field, SecretStr, ValidationError, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from mapmatch.errors import ConfigError
+from roadnets.route_store import DEFAULT_BUDGET_MB
 
 __all__ = ["Settings", "SettingsError", "load_settings"]
 
@@ -113,6 +116,13 @@ class Settings(BaseSettings):
     )
     max_columns: int = Field(
         default=256, ge=3, le=100_000, description="Most columns of a CSV body."
+    )
+    route_table_mb: float = Field(
+        default=DEFAULT_BUDGET_MB,
+        ge=0,
+        allow_inf_nan=False,
+        description="Largest route table for sparse traces a network keeps (read from the "
+        "cache or built at load, shared by the workers), MB; 0: none, routes are searched.",
     )
     memory_budget_mb: float = Field(
         default=2048.0,
