@@ -52,8 +52,9 @@ __all__ = [
 #: after a 30 s step reach about 1,500 m (``route_factor`` x the step + ``route_slack_m``).
 ROUTE_TABLE_BOUND_M = 2000.0
 
-#: Largest table built without being asked (MB): Andorra's 5,625 edges need 45 MB at
-#: 2,000 m, a 200,000-edge city about 1.6 GB (then none is built and searches answer).
+#: Largest table built without being asked (MB): Andorra's 5,625 edges need 51 MB at
+#: 2,000 m, the 200,000-edge grid city of bench_match.py about 17 GB (estimated in 0.6 s;
+#: then none is built and searches answer).
 DEFAULT_BUDGET_MB = 256.0
 
 #: Name of the background thread that reads or builds a table.
