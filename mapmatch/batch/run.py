@@ -393,6 +393,9 @@ def run_batch(
                 resumed=len(done),
             )
         if pending:
+            # read (or build, within its budget) the route table for sparse traces once, here:
+            # the workers then map the cache entry's copy instead of each building its own
+            net.sparse_route_table()
             workers, notes = _worker_count(options, len(pending))
             executor = make_executor(
                 workers,

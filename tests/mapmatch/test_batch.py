@@ -523,3 +523,12 @@ def test_issue_12_id_column_flag_groups_by_another_column(
     assert {k: r["points"] for k, r in rows.items()} == {"ana": "60", "bo": "60"}
     run = json.loads((tmp_path / "two" / "run.json").read_text())
     assert run["fingerprint"]["id_column"] == "driver"
+
+
+def test_a_batch_makes_the_route_table_once_before_its_workers_start(
+    mixed_folder: Path, tmp_path: Path
+) -> None:
+    cache = tmp_path / "cache"
+    argv = [str(mixed_folder), "--out", str(tmp_path / "out"), "--cache-dir", str(cache)]
+    cli_main(["match", *argv, "--workers", "1", "--quiet"])  # the folder holds bad files too
+    assert [p.parent.name for p in cache.glob("*/*/meta.json")] == ["routes"]
