@@ -14,7 +14,7 @@ a 404 tell a caller without a token which routes exist.
 from __future__ import annotations
 
 import secrets
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated, TypeVar
 
 from fastapi import Depends, Request
 
@@ -24,6 +24,11 @@ from api.networks import NetworkRegistry
 from api.schemas import MatchQuery
 from api.service import MatchService
 from api.settings import Settings
+
+if TYPE_CHECKING:
+    from collections.abc import Awaitable, Callable
+
+T = TypeVar("T")
 
 __all__ = [
     "BearerToken",
@@ -36,6 +41,7 @@ __all__ = [
     "get_networks",
     "get_service",
     "get_settings",
+    "on_the_loop",
     "ready_networks",
     "single_valued_query",
 ]
@@ -88,11 +94,28 @@ def get_metrics(request: Request) -> ServiceMetrics:
     return value
 
 
-SettingsDep = Annotated[Settings, Depends(get_settings)]
-NetworksDep = Annotated[NetworkRegistry, Depends(get_networks)]
-ReadyNetworksDep = Annotated[NetworkRegistry, Depends(ready_networks)]
-ServiceDep = Annotated[MatchService, Depends(get_service)]
-MetricsDep = Annotated[ServiceMetrics, Depends(get_metrics)]
+def on_the_loop(accessor: Callable[[Request], T]) -> Callable[[Request], Awaitable[T]]:
+    """
+    ``accessor`` as an ``async`` dependency, called on the event loop.
+
+    FastAPI runs a plain ``def`` dependency in a worker thread: two thread hops and a lock
+    handed over per dependency and request, for a lookup that takes a microsecond (26 % of
+    the interpreter lock's time under load went to solving five of them).
+    """
+
+    async def dependency(request: Request) -> T:
+        return accessor(request)
+
+    dependency.__name__ = dependency.__qualname__ = accessor.__name__
+    dependency.__doc__ = accessor.__doc__
+    return dependency
+
+
+SettingsDep = Annotated[Settings, Depends(on_the_loop(get_settings))]
+NetworksDep = Annotated[NetworkRegistry, Depends(on_the_loop(get_networks))]
+ReadyNetworksDep = Annotated[NetworkRegistry, Depends(on_the_loop(ready_networks))]
+ServiceDep = Annotated[MatchService, Depends(on_the_loop(get_service))]
+MetricsDep = Annotated[ServiceMetrics, Depends(on_the_loop(get_metrics))]
 
 
 class BearerToken:
@@ -136,7 +159,7 @@ class BearerToken:
             raise UnauthorizedError(problem)
 
 
-def single_valued_query(request: Request) -> None:
+async def single_valued_query(request: Request) -> None:
     """
     Refuse a query parameter given more than once (only list-valued ones may repeat).
 
