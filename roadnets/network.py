@@ -428,29 +428,23 @@ class RoadNetwork:
         Vertices (metres) of a path of edge stretches, in order, joints not repeated.
 
         Stretch ``i`` runs along ``edge[i]`` from ``start_m[i]`` to ``end_m[i]``; its ends are
-        interpolated, the edge's vertices between them kept. Vectorised over the stretches.
+        interpolated, the edge's vertices between them kept. One compiled pass
+        (:func:`~roadnets.spatial_kernels.path_polyline_kernel`).
         """
+        from roadnets.spatial_kernels import path_polyline_kernel
+
         a = self.arrays
-        edge = np.asarray(edge, dtype=np.int64)
-        lo, hi = np.asarray(start_m, np.float64), np.asarray(end_m, np.float64)
-        sizes = a.edge_geom_ptr[edge + 1] - a.edge_geom_ptr[edge]
-        owner = np.repeat(np.arange(len(edge)), sizes)
-        vertex = np.repeat(a.edge_geom_ptr[edge] - np.cumsum(sizes) + sizes, sizes) + np.arange(
-            int(sizes.sum())
+        x, y = path_polyline_kernel(
+            np.ascontiguousarray(edge, dtype=np.int64),
+            np.ascontiguousarray(start_m, dtype=np.float64),
+            np.ascontiguousarray(end_m, dtype=np.float64),
+            a.edge_geom_ptr,
+            a.geom_cum_m,
+            a.geom_x,
+            a.geom_y,
+            a.edge_length_m,
         )
-        along = a.geom_cum_m[vertex]
-        inner = (along > lo[owner]) & (along < hi[owner])
-        ends_x, ends_y = self.point_on_edge(np.concatenate((edge, edge)), np.concatenate((lo, hi)))
-        n = len(edge)
-        x = np.concatenate((ends_x[:n], a.geom_x[vertex[inner]], ends_x[n:]))
-        y = np.concatenate((ends_y[:n], a.geom_y[vertex[inner]], ends_y[n:]))
-        key_owner = np.concatenate((np.arange(n), owner[inner], np.arange(n)))
-        key_along = np.concatenate((lo - 1.0, along[inner], hi + 1.0))
-        order = np.lexsort((key_along, key_owner))
-        x, y = x[order], y[order]
-        repeat = np.zeros(len(x), dtype=bool)
-        repeat[1:] = (np.abs(np.diff(x)) < 1e-9) & (np.abs(np.diff(y)) < 1e-9)
-        return x[~repeat], y[~repeat]
+        return np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
 
     def edge_osm_ids(self, edge: IntArray) -> tuple[IntArray, IntArray, IntArray]:
         """OSM ``(u, v, key)`` of each edge (u and v are OSM node ids)."""

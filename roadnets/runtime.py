@@ -96,7 +96,9 @@ def _dispatchers() -> list[object]:
         route_search.route_pairs_kernel,
         route_search.table_records,
         route_search.gather,
+        route_search.within_search_bounds,
         spatial_kernels.nearby_kernel,
+        spatial_kernels.path_polyline_kernel,
     ]
 
 
@@ -169,6 +171,9 @@ def warm_kernels() -> KernelWarmup:
     routes.table.lookup(edges[:2], edges[:2])
     x, y = net.project(np.array([7.4205]), np.array([43.7305]))
     net.nearby_edges(x, y, 50.0)
+    net.path_polyline(edges[:2], np.zeros(2), a.edge_length_m[:2])
+    net.precompute_routes(1000.0)
+    net.edge_routes(edges, edges[::-1], 500.0)  # answered from the table
     misses_now, hits_now = _counts()
     return KernelWarmup(time.perf_counter() - started, misses_now - misses, hits_now - hits)
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["nearby_kernel"]
+__all__ = ["nearby_kernel", "path_polyline_kernel"]
 
 
 #: How much a packed tree's probe box is widened, metres: a segment the exact distance test
@@ -271,3 +271,58 @@ def _sort_rows(order, n, row_e, row_f, col, edge_first):  # type: ignore[no-unty
             order[j + 1] = other
             j -= 1
         order[j + 1] = item
+
+
+@njit(cache=True, nogil=True)
+def _point_at(e, offset, geom_ptr, geom_cum_m, geom_x, geom_y, edge_len):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """The position ``offset`` metres along edge ``e`` (clipped to the edge)."""
+    off = min(max(offset, 0.0), edge_len[e])
+    lo, hi = geom_ptr[e], geom_ptr[e + 1] - 2  # the edge's segments start at lo..hi
+    i = lo
+    while i < hi and geom_cum_m[i + 1] <= off:
+        i += 1
+    seg = geom_cum_m[i + 1] - geom_cum_m[i]
+    t = (off - geom_cum_m[i]) / seg if seg > 0 else 0.0
+    t = min(max(t, 0.0), 1.0)
+    return geom_x[i] + t * (geom_x[i + 1] - geom_x[i]), geom_y[i] + t * (geom_y[i + 1] - geom_y[i])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _append(xs, ys, n, x, y):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """Append ``(x, y)`` unless it lies within 1e-9 m of the last point; the new count."""
+    if n > 0 and abs(x - xs[n - 1]) < 1e-9 and abs(y - ys[n - 1]) < 1e-9:
+        return n
+    xs[n] = x
+    ys[n] = y
+    return n + 1
+
+
+@njit(cache=True, nogil=True)
+def path_polyline_kernel(edge, start_m, end_m, geom_ptr, geom_cum_m, geom_x, geom_y, edge_len):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """
+    Vertices of a path of edge stretches (see :meth:`~roadnets.RoadNetwork.path_polyline`).
+
+    Per stretch: its start, the edge's vertices strictly between start and end, its end (the
+    end first when it lies more than 2 m before the start); a point within 1e-9 m of the one
+    before it is left out.
+    """
+    cap = 2 * len(edge)
+    for k in range(len(edge)):
+        cap += geom_ptr[edge[k] + 1] - geom_ptr[edge[k]]
+    xs = np.empty(cap)
+    ys = np.empty(cap)
+    n = 0
+    for k in range(len(edge)):
+        e, lo, hi = edge[k], start_m[k], end_m[k]
+        sx, sy = _point_at(e, lo, geom_ptr, geom_cum_m, geom_x, geom_y, edge_len)
+        ex, ey = _point_at(e, hi, geom_ptr, geom_cum_m, geom_x, geom_y, edge_len)
+        if lo - 1.0 > hi + 1.0:  # backwards: no vertex lies between
+            n = _append(xs, ys, n, ex, ey)
+            n = _append(xs, ys, n, sx, sy)
+            continue
+        n = _append(xs, ys, n, sx, sy)
+        for v in range(geom_ptr[e], geom_ptr[e + 1]):
+            if lo < geom_cum_m[v] < hi:
+                n = _append(xs, ys, n, geom_x[v], geom_y[v])
+        n = _append(xs, ys, n, ex, ey)
+    return xs[:n], ys[:n]
