@@ -53,8 +53,9 @@ __all__ = [
 ROUTE_TABLE_BOUND_M = 2000.0
 
 #: Largest table built without being asked (MB): Andorra's 5,625 edges need 51 MB at
-#: 2,000 m, the 200,000-edge grid city of bench_match.py about 17 GB (estimated in 0.6 s;
-#: then none is built and searches answer).
+#: 2,000 m, Liechtenstein's 117 MB, the 200,000-edge grid city of bench_match.py about 17 GB
+#: (estimated in 0.6 s; then none is built and searches answer). Building one takes about
+#: twice its size for a moment (peak RSS +107 MB for Andorra's, +257 MB for Liechtenstein's).
 DEFAULT_BUDGET_MB = 256.0
 
 #: Name of the background thread that reads or builds a table.

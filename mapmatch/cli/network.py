@@ -44,7 +44,8 @@ def add_parser(sub: Any) -> None:
         default=DEFAULT_BUDGET_MB,
         metavar="MB",
         help="build: also build the route table sparse traces are matched with, when its "
-        f"estimated size fits this many MB (default {DEFAULT_BUDGET_MB:.0f}; 0: none)",
+        f"estimated size fits this many MB (default {DEFAULT_BUDGET_MB:.0f}; 0: none; building it "
+        "takes about twice its size for a moment)",
     )
     parser.set_defaults(run=run)
 
