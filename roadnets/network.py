@@ -336,10 +336,9 @@ class RoadNetwork:
         Its size grows with the edges times the edges within reach: measure first
         (``benchmarks/bench_routing.py`` reports it).
         """
-        table = self.route_table(
-            np.arange(self.arrays.n_edges), float(bound_m), uturn_cost_m=uturn_cost_m
-        )
-        table.records(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))  # its index
+        from roadnets.route_store import build_table
+
+        table = build_table(self.arrays, self.turns, float(bound_m), uturn_cost_m=uturn_cost_m)
         self.precomputed_routes = table
         return table
 
@@ -370,6 +369,25 @@ class RoadNetwork:
     def route_table_note(self) -> str:
         """What became of the sparse-trace route table (read, built, too large ...)."""
         return self._route_keeper.note
+
+    @cached_property
+    def kernel_geometry(self) -> tuple[FloatArray | IntArray, ...]:
+        """
+        The arrays the compiled path kernels read, in their order.
+
+        ``(edge_len, geom_ptr, geom_x, geom_y, geom_cum, vertex_pos)``, what
+        :func:`~roadnets.spatial_kernels.point_on_edge` and the kernels built on it take
+        (``vertex_pos``: each vertex's distance along the concatenation of all edges).
+        """
+        a = self.arrays
+        return (
+            a.edge_length_m,
+            a.edge_geom_ptr,
+            a.geom_x,
+            a.geom_y,
+            a.geom_cum_m,
+            self._vertex_position,
+        )
 
     @cached_property
     def _vertex_position(self) -> FloatArray:
@@ -433,16 +451,11 @@ class RoadNetwork:
         """
         from roadnets.spatial_kernels import path_polyline_kernel
 
-        a = self.arrays
         x, y = path_polyline_kernel(
             np.ascontiguousarray(edge, dtype=np.int64),
             np.ascontiguousarray(start_m, dtype=np.float64),
             np.ascontiguousarray(end_m, dtype=np.float64),
-            a.edge_geom_ptr,
-            a.geom_cum_m,
-            a.geom_x,
-            a.geom_y,
-            a.edge_length_m,
+            self.kernel_geometry,
         )
         return np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
 

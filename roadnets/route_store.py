@@ -74,6 +74,9 @@ _ARRAYS = ("ptr", "state", "distance_m", "time_s", "uturns", "pred", "order")
 #: predecessor and sort order (int32).
 _RECORD_BYTES = 4 + 8 + 8 + 2 + 4 + 4
 
+#: The note when the network holds a table of its caller's (:meth:`precompute_routes`).
+_GIVEN = "given (precompute_routes)"
+
 _log = logging.getLogger("roadnets")
 
 
@@ -268,7 +271,7 @@ def _provide(net: RoadNetwork, keeper: TableKeeper) -> str:
     from roadnets.turns import DEFAULT_UTURN_COST_M
 
     if net.precomputed_routes is not None:
-        return "given (precompute_routes)"
+        return _GIVEN
     entry = Path(net.cache_entry) if net.cache_entry is not None else None
     bound, cost = ROUTE_TABLE_BOUND_M, DEFAULT_UTURN_COST_M
     found = None
@@ -300,7 +303,7 @@ def _attach(
     net: RoadNetwork, keeper: TableKeeper, table: RouteTable, *, stored: bool, how: str
 ) -> str:
     if net.precomputed_routes is not None:  # one given meanwhile wins
-        return "given (precompute_routes)"
+        return _GIVEN
     net.precomputed_routes = table
     keeper.stored = stored
     return f"{how}: {table_bytes(table) / 1e6:,.0f} MB, routes within {ROUTE_TABLE_BOUND_M:,.0f} m"

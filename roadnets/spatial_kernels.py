@@ -1,4 +1,4 @@
-"""The compiled probe of a :class:`~roadnets.spatial.PackedTree` and the nearby-edge query.
+"""Compiled spatial kernels: the packed tree's probe, nearby edges, places and paths on edges.
 
 Separate from :mod:`roadnets.spatial` so that importing roadnets does not import numba.
 """
@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["nearby_kernel", "path_polyline_kernel"]
+__all__ = ["nearby_kernel", "path_polyline_kernel", "point_on_edge"]
 
 
 #: How much a packed tree's probe box is widened, metres: a segment the exact distance test
@@ -274,15 +274,14 @@ def _sort_rows(order, n, row_e, row_f, col, edge_first):  # type: ignore[no-unty
 
 
 @njit(cache=True, nogil=True)
-def _point_at(e, offset, geom_ptr, geom_cum_m, geom_x, geom_y, edge_len):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    """The position ``offset`` metres along edge ``e`` (clipped to the edge)."""
-    off = min(max(offset, 0.0), edge_len[e])
-    lo, hi = geom_ptr[e], geom_ptr[e + 1] - 2  # the edge's segments start at lo..hi
-    i = lo
-    while i < hi and geom_cum_m[i + 1] <= off:
-        i += 1
-    seg = geom_cum_m[i + 1] - geom_cum_m[i]
-    t = (off - geom_cum_m[i]) / seg if seg > 0 else 0.0
+def point_on_edge(edge, offset, edge_len, geom_ptr, geom_x, geom_y, geom_cum, vertex_pos):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """:meth:`RoadNetwork.point_on_edge <roadnets.RoadNetwork.point_on_edge>` of one place."""
+    offset = min(max(offset, 0.0), edge_len[edge])
+    base = vertex_pos[geom_ptr[edge]]
+    i = np.searchsorted(vertex_pos, base + offset, side="right") - 1
+    i = min(max(i, geom_ptr[edge]), geom_ptr[edge + 1] - 2)
+    seg = geom_cum[i + 1] - geom_cum[i]
+    t = (offset - geom_cum[i]) / seg if seg > 0 else 0.0
     t = min(max(t, 0.0), 1.0)
     return geom_x[i] + t * (geom_x[i + 1] - geom_x[i]), geom_y[i] + t * (geom_y[i + 1] - geom_y[i])
 
@@ -298,14 +297,17 @@ def _append(xs, ys, n, x, y):  # type: ignore[no-untyped-def]  # pragma: no cove
 
 
 @njit(cache=True, nogil=True)
-def path_polyline_kernel(edge, start_m, end_m, geom_ptr, geom_cum_m, geom_x, geom_y, edge_len):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+def path_polyline_kernel(edge, start_m, end_m, geom):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     """
     Vertices of a path of edge stretches (see :meth:`~roadnets.RoadNetwork.path_polyline`).
+
+    ``geom`` is :attr:`~roadnets.RoadNetwork.kernel_geometry`.
 
     Per stretch: its start, the edge's vertices strictly between start and end, its end (the
     end first when it lies more than 2 m before the start); a point within 1e-9 m of the one
     before it is left out.
     """
+    geom_ptr, geom_x, geom_y, geom_cum_m = geom[1], geom[2], geom[3], geom[4]
     cap = 2 * len(edge)
     for k in range(len(edge)):
         cap += geom_ptr[edge[k] + 1] - geom_ptr[edge[k]]
@@ -314,8 +316,8 @@ def path_polyline_kernel(edge, start_m, end_m, geom_ptr, geom_cum_m, geom_x, geo
     n = 0
     for k in range(len(edge)):
         e, lo, hi = edge[k], start_m[k], end_m[k]
-        sx, sy = _point_at(e, lo, geom_ptr, geom_cum_m, geom_x, geom_y, edge_len)
-        ex, ey = _point_at(e, hi, geom_ptr, geom_cum_m, geom_x, geom_y, edge_len)
+        sx, sy = point_on_edge(e, lo, *geom)
+        ex, ey = point_on_edge(e, hi, *geom)
         if lo - 1.0 > hi + 1.0:  # backwards: no vertex lies between
             n = _append(xs, ys, n, ex, ey)
             n = _append(xs, ys, n, sx, sy)

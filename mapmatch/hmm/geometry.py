@@ -7,6 +7,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numba import njit
 
+from roadnets.spatial_kernels import point_on_edge
+
 if TYPE_CHECKING:
     from roadnets import RoadNetwork
 
@@ -15,22 +17,7 @@ __all__ = ["network_geometry", "point_on_edge", "project_kernel", "stretch_verti
 
 def network_geometry(net: RoadNetwork) -> tuple[Any, ...]:
     """``(edge_len, geom_ptr, geom_x, geom_y, geom_cum, vertex_pos)``: what these kernels read."""
-    a = net.arrays
-    vertex_pos = net._vertex_position  # the key RoadNetwork.point_on_edge searches
-    return (a.edge_length_m, a.edge_geom_ptr, a.geom_x, a.geom_y, a.geom_cum_m, vertex_pos)
-
-
-@njit(cache=True, nogil=True)
-def point_on_edge(edge, offset, edge_len, geom_ptr, geom_x, geom_y, geom_cum, vertex_pos):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """:meth:`RoadNetwork.point_on_edge <roadnets.RoadNetwork.point_on_edge>` of one place."""
-    offset = min(max(offset, 0.0), edge_len[edge])
-    base = vertex_pos[geom_ptr[edge]]
-    i = np.searchsorted(vertex_pos, base + offset, side="right") - 1
-    i = min(max(i, geom_ptr[edge]), geom_ptr[edge + 1] - 2)
-    seg = geom_cum[i + 1] - geom_cum[i]
-    t = (offset - geom_cum[i]) / seg if seg > 0 else 0.0
-    t = min(max(t, 0.0), 1.0)
-    return geom_x[i] + t * (geom_x[i + 1] - geom_x[i]), geom_y[i] + t * (geom_y[i + 1] - geom_y[i])
+    return net.kernel_geometry
 
 
 @njit(cache=True, nogil=True)
