@@ -41,7 +41,26 @@ if TYPE_CHECKING:
     from mapmatch.types import BoolArray, FloatArray
     from roadnets import RoadNetwork
 
-__all__ = ["Assembled", "assemble"]
+__all__ = ["Assembled", "assemble", "scatter_sigma_m"]
+
+#: Fewest chosen observations from which :func:`scatter_sigma_m` estimates a scatter.
+SCATTER_MIN_OBSERVATIONS = 5
+
+
+def scatter_sigma_m(obs: Observations, solution: Solution) -> float:
+    """
+    The position sigma the matched fixes show about their roads (inf: too few to tell).
+
+    1.4826 x the median distance of the chosen candidates from their observations (the
+    median absolute deviation of a Gaussian), each scaled by the square root of the
+    observation's fix count, since a centroid of ``m`` fixes scatters ``sqrt(m)`` times less.
+    """
+    chosen = solution.states >= 0
+    if np.count_nonzero(chosen) < SCATTER_MIN_OBSERVATIONS:
+        return float("inf")
+    rows = solution.cands.ptr[:-1][chosen] + solution.states[chosen]
+    fixes = obs.stop[solution.used[chosen]] - obs.first[solution.used[chosen]]
+    return float(1.4826 * np.median(solution.cands.distance_m[rows] * np.sqrt(fixes)))
 
 
 @dataclass(frozen=True, slots=True)
@@ -135,9 +154,10 @@ def _place(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
         # junction cannot tell which side of it the car was: the path ends at the junction;
         # but no farther than a held car's scatter reaches (standstill_m): with sparse, noisy
         # fixes the resolution grows to tens of metres, and cutting that much off each end of
-        # every trip is a bias of its own
-        thinning, reach_cap = end_reach
-        low = np.inf
+        # every trip is a bias of its own. Sigma is the assumed one, or the scatter the fixes
+        # show about their roads when that is smaller (exact fixes resolve every junction)
+        thinning, reach_cap, scatter = end_reach
+        low = scatter
         for k in range(start, stop):
             low = min(low, o_sigma[used[k]])
         reach = min(thinning * low, reach_cap)
@@ -283,7 +303,7 @@ def assemble(
         (obs.first, obs.stop, obs.of_fix, obs.stray, sigma),
         (x, y, radius, np.ascontiguousarray(outlier, np.bool_)),
         np.ascontiguousarray(chosen, f8),
-        (float(config.thinning_sigmas), float(config.standstill_m)),
+        (float(config.thinning_sigmas), float(config.standstill_m), scatter_sigma_m(obs, solution)),
         geom,
         (a.node_osm_id, a.edge_u, a.edge_v, a.edge_key),
     )

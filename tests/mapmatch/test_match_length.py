@@ -172,3 +172,24 @@ def test_an_excursion_longer_than_the_outlier_gap_is_a_drive_not_a_stray() -> No
         group, stray = group_fixes(x, y, sigma, MatchConfig(), time_s=np.arange(7.0) * interval)
         assert stray[3:5].tolist() == [tip_is_stray] * 2
         assert (group[3] == group[2]) == tip_is_stray
+
+
+@pytest.mark.parametrize("with_heading", [False, True])
+def test_exact_fixes_just_past_a_junction_keep_their_metres(
+    tmp_path: Path, with_heading: bool
+) -> None:
+    # start 8 m before a junction, end 8 m after one: stretches shorter than the noise a fix
+    # may have (2 sigma) are cut off the ends, but fixes that lie exactly on their roads show
+    # no such noise, and the 16 m are driven (they were cut whenever the end candidates sat
+    # on the far side of the junction, as the heading puts them)
+    grid = [
+        (1, [(0.0, 0.0), (200.0, 0.0), (400.0, 0.0)], RESIDENTIAL),
+        (2, [(200.0, -200.0), (200.0, 0.0), (200.0, 200.0)], RESIDENTIAL),
+        (3, [(400.0, -200.0), (400.0, 0.0), (400.0, 200.0)], RESIDENTIAL),
+    ]
+    net = load(write_osm(tmp_path / "grid.osm", grid))
+    x, y, heading, t = drive(
+        [(200.0, -8.0), (200.0, 0.0), (400.0, 0.0), (400.0, 8.0)], speed_mps=8.0
+    )
+    trace = trace_of(x, y, time_s=t, heading=heading if with_heading else None)
+    assert mapmatch.match(trace, net).matched_length_m == pytest.approx(216.0, rel=0.005)
