@@ -6,9 +6,9 @@ holding) is scored in one compiled kernel.)
 Newson & Krumm's exponential in ``|great-circle - route|`` with a scale that grows with the
 interval and the position sigma, a speed-plausibility term against the roads' limits
 (reference paper, eq. 24), a flat-bottomed term against the distance the trace says it
-travelled, and the cost of a U-turn, lowered by heading evidence. ``transitions`` scores every
-pair's forward route, its U-turn in the middle of the road and its standstill, and keeps the
-best.
+travelled, and the cost of a U-turn, lowered by heading evidence. :func:`transitions_kernel`
+scores every pair's forward route, its U-turn in the middle of the road and its standstill,
+and keeps the best.
 
 The scores are compiled functions of one pair (:func:`transition_score`,
 :func:`uturn_cost`); :func:`transitions_kernel` scores every pair of a trellis in one call,
@@ -44,7 +44,6 @@ from mapmatch.hmm.routes import (
     ROUTE_STANDSTILL,
     ROUTE_UTURN,
     ROUTE_UTURN_AT_NODE,
-    CandidatePairs,
     forward_route,
     held_across,
     held_behind,
@@ -59,19 +58,17 @@ from roadnets.route_search import (
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
-    from mapmatch.hmm.candidates import Candidates
-    from mapmatch.hmm.observations import Observations
     from mapmatch.types import FloatArray, IntArray
     from roadnets import EdgeRoutes, RoadNetwork
 
 __all__ = [
     "TABLE_FROM_MEAN_BOUND_M",
+    "driving_on_explains",
     "log_transition",
     "route_inputs",
     "routes_found",
     "table_pays",
     "transition_score",
-    "transitions",
     "transitions_kernel",
     "uturn_cost",
     "uturn_penalties",
@@ -288,16 +285,33 @@ def dead_end_ahead(edge, trans_ptr, trans_to, state_edge, edge_twin):  # type: i
 
 
 @njit(cache=True, nogil=True)
+def driving_on_explains(edge, from_m, heading, lo, hi, c_edge, c_off, c_bear):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    Whether driving on along ``edge`` explains a heading that turned round.
+
+    It does when a candidate among rows ``lo:hi`` lies ahead of ``from_m`` on ``edge`` with
+    the road there pointing within 90 degrees of ``heading``. On a hairpin or a winding
+    mountain road the heading reverses between two sparse fixes without any U-turn; only
+    where the road itself does not turn so is a reversal evidence.
+    """
+    for r in range(lo, hi):
+        if c_edge[r] == edge and c_off[r] >= from_m and angle_between(heading, c_bear[r]) < 90.0:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True)
 def transitions_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     graph, ws, scratch, uturn_cost_m, table, edge_speed,
-    c_edge, c_off, c_dist, c_x, c_y,
+    c_edge, c_off, c_dist, c_x, c_y, c_bear, c_ptr,
     step, a, b, bounds,
     step_m, dt, sigma, fix_x, fix_y, travel_m, slack_m, heading, speed,
     params,
 ):  # fmt: skip
     """
-    Log transition and route kind of every candidate pair (see :func:`transitions`).
+    Log transition and route kind of every candidate pair: the best of its explanations.
 
+    ``c_ptr`` gives each used observation's candidate rows, ``c_bear`` their road direction;
     ``step_m, dt, travel_m, slack_m`` are per step between the used observations,
     ``sigma, fix_x, fix_y, heading, speed`` per used observation (``travel_m`` and
     ``heading`` empty when unknown). Returns the scores, the kinds and the forward routes
@@ -323,6 +337,10 @@ def transitions_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - co
         if len(heading):
             w = min(speed_weight(speed[t], params), speed_weight(speed[t + 1], params))
             penalty[k] = uturn_cost(heading[t], heading[t + 1], w, params)
+            if penalty[k] < params[P_UTURN_PENALTY] and driving_on_explains(
+                ea[k], oa[k], heading[t + 1], c_ptr[t + 1], c_ptr[t + 2], c_edge, c_off, c_bear
+            ):
+                penalty[k] = params[P_UTURN_PENALTY]
         else:
             penalty[k] = params[P_UTURN_PENALTY]
         e1, e2 = ea[k], eb[k]
@@ -435,47 +453,3 @@ def routes_found(net: RoadNetwork, ea: IntArray, eb: IntArray, out: tuple[Any, .
         return EdgeRoutes(ea, eb, dist, time, turns, rec, net.precomputed_routes)
     found = (*searched, rec, dist, time, turns)
     return edge_routes_of(net.turns, (DEFAULT_UTURN_COST_M, None, None), ea, eb, found)
-
-
-def transitions(
-    net: RoadNetwork,
-    fixes: Observations,
-    cands: Candidates,
-    pairs: CandidatePairs,
-    bounds_m: FloatArray,
-    used: IntArray,
-    step_m: FloatArray,
-    config: MatchConfig,
-) -> tuple[FloatArray, IntArray, EdgeRoutes]:
-    """
-    Log transition and route kind of every candidate pair: the best of its explanations.
-
-    Driving forward (along the edge or through the graph) is scored for every pair; a U-turn
-    in the middle of the road where ``b`` is on the reverse of ``a``'s edge; and holding still
-    where ``b`` lies a little behind ``a``. A held car is where ``a`` is, so the standstill
-    is also charged the emission ``b``'s fix has at ``a``'s place instead of its own.
-    """
-    f8 = np.float64
-    travel_m = slack_m = np.empty(0)
-    if fixes.travel is not None:
-        travel_m, slack_m = fixes.travel.between(used)
-    heading = np.empty(0) if fixes.heading_deg is None else fixes.heading_deg[used]
-    args = (
-        *route_inputs(net),
-        net.arrays.edge_speed_mps,
-        cands.edge, cands.offset_m, cands.distance_m, cands.x, cands.y,
-        pairs.step, pairs.a, pairs.b, np.ascontiguousarray(bounds_m, f8),
-        np.ascontiguousarray(step_m, f8),
-        np.ascontiguousarray(np.diff(fixes.time_s[used]), f8),
-        np.ascontiguousarray(fixes.sigma_m[used], f8),
-        np.ascontiguousarray(fixes.x[used], f8),
-        np.ascontiguousarray(fixes.y[used], f8),
-        np.ascontiguousarray(travel_m, f8), np.ascontiguousarray(slack_m, f8),
-        np.ascontiguousarray(heading, f8),
-        np.ascontiguousarray(fixes.speed_mps[used], f8),
-        model_params(config),
-    )  # fmt: skip
-    out = transitions_kernel(*args)
-    lt, kind = out[0], out[1]
-    routes = routes_found(net, cands.edge[pairs.a], cands.edge[pairs.b], out[2:])
-    return lt, kind, routes

@@ -127,7 +127,7 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     heading = oheading[used] if has_heading else oheading
     lt, kind, fits, searched, rec, r_dist, r_time, r_turns = transitions_kernel(
         graph, ws, scratch, uturn_cost_m, table, edge_speed,
-        edge, off, dist, cx, cy, step, a, b, bounds,
+        edge, off, dist, cx, cy, bear, ptr, step, a, b, bounds,
         step_m, dt, osigma[used], ox[used], oy[used], travel_m, slack, heading, ospeed[used],
         params,
     )  # fmt: skip

@@ -7,7 +7,7 @@ from mapmatch.config import MatchConfig
 from mapmatch.errors import ConfigError
 from mapmatch.hmm.emission import heading_weight, log_emission, log_heading
 from mapmatch.hmm.routes import ROUTE_SAME_EDGE, ROUTE_UTURN, ROUTE_VIA_GRAPH, candidate_pairs
-from mapmatch.hmm.transition import log_transition
+from mapmatch.hmm.transition import driving_on_explains, log_transition
 
 
 def test_emission_is_gaussian_in_distance() -> None:
@@ -69,6 +69,18 @@ def test_implausible_speed_and_u_turns_cost_extra() -> None:
         cfg,
     )
     assert lu[0] - lu[1] == pytest.approx(cfg.uturn_penalty)
+
+
+def test_a_heading_that_turned_round_is_no_u_turn_evidence_where_the_road_turns() -> None:
+    # a car heading east at offset 50 m of edge 7, then west: evidence of a U-turn on a
+    # straight road, none where a candidate ahead on edge 7 points west (a hairpin)
+    edge = np.array([7, 7, 8])
+    offset = np.array([20.0, 300.0, 10.0])
+    bearing = np.array([270.0, 265.0, 270.0])
+    assert driving_on_explains(7, 50.0, 270.0, 0, 3, edge, offset, bearing)
+    assert not driving_on_explains(7, 50.0, 270.0, 0, 1, edge, offset, bearing)  # behind
+    assert not driving_on_explains(7, 50.0, 90.0, 0, 3, edge, offset, bearing)  # against
+    assert not driving_on_explains(9, 0.0, 270.0, 0, 3, edge, offset, bearing)  # other road
 
 
 def test_reported_travel_only_counts_outside_its_tolerance() -> None:
