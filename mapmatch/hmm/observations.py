@@ -26,6 +26,7 @@ if TYPE_CHECKING:
     from mapmatch.types import BoolArray, FloatArray, IntArray
 
 __all__ = [
+    "TRUSTED_SLACK_FRAC",
     "Observations",
     "Travel",
     "between_kernel",
@@ -33,6 +34,12 @@ __all__ = [
     "merge_fixes",
     "travel_arrays",
 ]
+
+
+#: A travel between two observations says how far the car went, not just about how far, when
+#: its slack is at most this share of it: an odometer's increment (no slack), or reported
+#: speeds integrated over 1-5 s steps; not two speeds 15 s apart (the car may have braked).
+TRUSTED_SLACK_FRAC = 0.25
 
 
 @njit(cache=True, nogil=True)

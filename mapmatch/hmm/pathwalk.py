@@ -15,7 +15,7 @@ from numba import njit
 
 from mapmatch.hmm.geometry import project_kernel, stretch_vertices
 from mapmatch.hmm.loops import collapse_kernel
-from mapmatch.hmm.observations import between_kernel
+from mapmatch.hmm.observations import TRUSTED_SLACK_FRAC, between_kernel
 from mapmatch.hmm.routes import ROUTE_SAME_EDGE, ROUTE_STANDSTILL, ROUTE_UTURN
 from mapmatch.hmm.transition import _pair_routes
 
@@ -149,7 +149,7 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
                 used[start:stop], odometer, speed_m, slack_m, unknown_lo, unknown_hi
             )
             for k in range(len(piece_travel)):
-                if slack_t[k] <= 0.25 * dist_t[k]:
+                if slack_t[k] <= TRUSTED_SLACK_FRAC * dist_t[k]:
                     piece_travel[k] = dist_t[k]
         row0 = c_ptr[start] + states[start]
         n_path = 1

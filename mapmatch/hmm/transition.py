@@ -23,6 +23,7 @@ import numpy as np
 from numba import njit
 
 from mapmatch.hmm.emission import angle_between, distance_score, flat_arrays, speed_weight
+from mapmatch.hmm.observations import TRUSTED_SLACK_FRAC
 from mapmatch.hmm.params import (
     P_BETA_M,
     P_BETA_PER_S,
@@ -100,7 +101,12 @@ def transition_score(gc, route, time, uturn, dt, sigma, travel, slack, penalty, 
     timed = np.isfinite(dt) and dt > 0
     interval = dt if timed else gc / params[P_NOMINAL_SPEED]
     beta = params[P_BETA_M] + params[P_BETA_PER_S] * interval + params[P_BETA_PER_SIGMA] * sigma
-    score = -abs(gc - route) / beta
+    # the route is as plausible as its better explanation: the straight line, or the travel
+    # where the trace says how far the car went (a winding road is long against its chord)
+    gap = abs(gc - route)
+    if np.isfinite(travel) and slack <= TRUSTED_SLACK_FRAC * travel:
+        gap = min(gap, abs(travel - route))
+    score = -gap / beta
     needed = _max0(route - 2.0 * sigma) / dt if timed else np.nan
     limit = route / time if time > 0 else np.inf
     allowed = params[P_SPEED_FACTOR] * limit + params[P_SPEED_MARGIN]
@@ -140,14 +146,17 @@ def log_transition(
     Log-likelihood of moving between two candidates of consecutive fixes.
 
     ``-|great-circle - route| / beta`` with ``beta = beta_m + beta_per_s * dt`` (Newson &
-    Krumm's exponential, widened for long intervals), minus a speed-plausibility penalty when
-    the route needs a speed well above the roads' limits, minus ``uturn_penalty`` for a
-    U-turn in the middle of a road. When the trace says how far the car travelled between the
-    fixes (``travel``: the distance, odometer increments or mean reported speed times ``dt``,
-    NaN where unknown, and an extra slack for the latter), a route that differs from it by
-    more than the tolerance (``travel_tolerance_m + travel_tolerance_frac * travel + slack``)
-    costs the excess over ``travel_beta_m``. Inside the tolerance the term is flat, so the
-    fused distance never pulls the matched length and the distance check stays independent.
+    Krumm's exponential, widened for long intervals; where the trace says how far the car
+    went, a travel with a slack of at most :data:`TRUSTED_SLACK_FRAC` of it, the smaller of
+    that and ``|travel - route|``, so a winding road is not charged for its chord), minus a
+    speed-plausibility penalty when the route needs a speed well above the roads' limits,
+    minus ``uturn_penalty`` for a U-turn in the middle of a road. When the trace says how far
+    the car travelled between the fixes (``travel``: the distance, odometer increments or
+    mean reported speed times ``dt``, NaN where unknown, and an extra slack for the latter),
+    a route that differs from it by more than the tolerance (``travel_tolerance_m +
+    travel_tolerance_frac * travel + slack``) costs the excess over ``travel_beta_m``.
+    Inside the tolerance that term is flat, so the fused distance never pulls the matched
+    length and the distance check stays independent.
     Unreachable pairs (``route = inf``) are ``-inf``. A step without a usable time (none
     known, or a repeated one) is a distance-only step: no speed term, and the interval that
     widens beta is the one a car at the nominal speed would need for the step.
