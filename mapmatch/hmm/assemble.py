@@ -26,7 +26,7 @@ from mapmatch.hmm.geometry import (
     project_kernel,
     stretch_vertices,
 )
-from mapmatch.hmm.loops import loop_network
+from mapmatch.hmm.loops import chosen_distance_m, loop_network, scatter_sigma_m
 from mapmatch.hmm.observations import travel_arrays
 from mapmatch.hmm.params import model_params
 from mapmatch.hmm.pathwalk import walk_pieces
@@ -41,26 +41,7 @@ if TYPE_CHECKING:
     from mapmatch.types import BoolArray, FloatArray
     from roadnets import RoadNetwork
 
-__all__ = ["Assembled", "assemble", "scatter_sigma_m"]
-
-#: Fewest chosen observations from which :func:`scatter_sigma_m` estimates a scatter.
-SCATTER_MIN_OBSERVATIONS = 5
-
-
-def scatter_sigma_m(obs: Observations, solution: Solution) -> float:
-    """
-    The position sigma the matched fixes show about their roads (inf: too few to tell).
-
-    1.4826 x the median distance of the chosen candidates from their observations (the
-    median absolute deviation of a Gaussian), each scaled by the square root of the
-    observation's fix count, since a centroid of ``m`` fixes scatters ``sqrt(m)`` times less.
-    """
-    chosen = solution.states >= 0
-    if np.count_nonzero(chosen) < SCATTER_MIN_OBSERVATIONS:
-        return float("inf")
-    rows = solution.cands.ptr[:-1][chosen] + solution.states[chosen]
-    fixes = obs.stop[solution.used[chosen]] - obs.first[solution.used[chosen]]
-    return float(1.4826 * np.median(solution.cands.distance_m[rows] * np.sqrt(fixes)))
+__all__ = ["Assembled", "assemble"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -269,6 +250,7 @@ def assemble(
     a = net.arrays
     c, used, states = solution.cands, solution.used, solution.states
     geom = network_geometry(net)
+    scatter = scatter_sigma_m(obs, solution)
     f8 = np.float64
     x = np.ascontiguousarray(x, f8)
     y = np.ascontiguousarray(y, f8)
@@ -296,6 +278,8 @@ def assemble(
         model_params(config),
         float(config.loop_penalty),
         loop_network(net),
+        scatter,
+        chosen_distance_m(solution),
     )
     chosen = solution.post[np.arange(len(used)), np.maximum(states, 0)]
     place = (
@@ -303,7 +287,7 @@ def assemble(
         (obs.first, obs.stop, obs.of_fix, obs.stray, sigma),
         (x, y, radius, np.ascontiguousarray(outlier, np.bool_)),
         np.ascontiguousarray(chosen, f8),
-        (float(config.thinning_sigmas), float(config.standstill_m), scatter_sigma_m(obs, solution)),
+        (float(config.thinning_sigmas), float(config.standstill_m), scatter),
         geom,
         (a.node_osm_id, a.edge_u, a.edge_v, a.edge_key),
     )

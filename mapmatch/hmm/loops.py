@@ -43,7 +43,19 @@ if TYPE_CHECKING:
     from mapmatch.types import FloatArray
     from roadnets import RoadNetwork
 
-__all__ = ["collapse_kernel", "collapse_loops", "loop_network", "pairwise_sum"]
+__all__ = [
+    "SCATTER_MIN_OBSERVATIONS",
+    "chosen_distance_m",
+    "collapse_kernel",
+    "collapse_loops",
+    "loop_model",
+    "loop_network",
+    "pairwise_sum",
+    "scatter_sigma_m",
+]
+
+#: Fewest chosen observations from which :func:`scatter_sigma_m` estimates a scatter.
+SCATTER_MIN_OBSERVATIONS = 5
 
 
 _EPS_M = 1e-6
@@ -261,6 +273,7 @@ def _legal(e, edge_u, edge_v, trans_ptr, trans_to, state_edge):  # type: ignore[
 def _gain(along, e, lo, hi, place_x, place_y, s0, s1, model, travel, net):  # type: ignore[no-untyped-def]  # pragma: no cover
     """Log-likelihood of the loop as driven minus that of holding where it begins."""
     start, used, states, em_pad, ox, oy, otime, osigma, params = model[:9]
+    scatter, chosen_dist = model[10], model[11]
     edge_len, edge_v, edge_twin, out_ptr = net[0], net[2], net[3], net[6]
     n = len(along)
     before, after, inside = -1, -1, 0
@@ -310,11 +323,16 @@ def _gain(along, e, lo, hi, place_x, place_y, s0, s1, model, travel, net):  # ty
     for i in range(n):
         if s0 + _EPS_M < along[i] < s1 - _EPS_M:
             t = start + i
-            em_driven[j] = em_pad[t, states[t]]
             o = used[t]
-            em_held[j] = distance_score(
-                np.hypot(ox[o] - place_x, oy[o] - place_y), osigma[o], params
+            # both priced at the scatter the trace shows when it is below the assumed sigma:
+            # exact fixes 15 m into a dead end are no held car's scatter
+            sigma = min(osigma[o], scatter)
+            em_driven[j] = (
+                em_pad[t, states[t]]
+                - distance_score(chosen_dist[t], osigma[o], params)
+                + distance_score(chosen_dist[t], sigma, params)
             )
+            em_held[j] = distance_score(np.hypot(ox[o] - place_x, oy[o] - place_y), sigma, params)
             j += 1
     # the loop's U-turns cost what they cost in Viterbi, but one at a dead end's end is no
     # choice: the loop into a dead end is priced by loop_penalty alone
@@ -333,7 +351,8 @@ def collapse_kernel(e, lo, hi, along, model, travel, net):  # type: ignore[no-un
 
     ``(e, lo, hi)`` are the path's stretches and ``along`` the distance along it of each of
     the piece's observations; ``model`` is ``(start, used, states, log_emission, x, y, time,
-    sigma, params, loop_penalty)`` of the solution and its observations, ``travel`` their
+    sigma, params, loop_penalty, scatter, chosen distance)`` of the solution and its
+    observations (:func:`loop_model`), ``travel`` their
     travel arrays, ``net`` :func:`loop_network`. Returns the new stretches and distances and
     how many loops were taken out. The innermost loops go first; each one taken out leaves
     its observations at its node.
@@ -399,7 +418,31 @@ def loop_model(
         np.ascontiguousarray(obs.sigma_m, f8),
         model_params(config),
         float(config.loop_penalty),
+        scatter_sigma_m(obs, solution),
+        chosen_distance_m(solution),
     )
+
+
+def chosen_distance_m(solution: Solution) -> FloatArray:
+    """Distance of each used observation's chosen candidate from it (NaN: none chosen)."""
+    states = solution.states
+    rows = solution.cands.ptr[:-1] + np.maximum(states, 0)
+    return np.where(states >= 0, solution.cands.distance_m[rows], np.nan).astype(np.float64)
+
+
+def scatter_sigma_m(obs: Observations, solution: Solution) -> float:
+    """
+    The position sigma the matched fixes show about their roads (inf: too few to tell).
+
+    1.4826 x the median distance of the chosen candidates from their observations (the
+    median absolute deviation of a Gaussian), each scaled by the square root of the
+    observation's fix count, since a centroid of ``m`` fixes scatters ``sqrt(m)`` times less.
+    """
+    chosen = solution.states >= 0
+    if np.count_nonzero(chosen) < SCATTER_MIN_OBSERVATIONS:
+        return float("inf")
+    fixes = obs.stop[solution.used[chosen]] - obs.first[solution.used[chosen]]
+    return float(1.4826 * np.median(chosen_distance_m(solution)[chosen] * np.sqrt(fixes)))
 
 
 def collapse_loops(

@@ -107,8 +107,9 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     observations' travel arrays, ``net`` ``(edge_len, edge_speed, edge_u, edge_v, edge_twin,
     out_ptr, state_edge, geom)`` (``geom`` as :func:`stretch_vertices` reads it).
 
-    ``loops`` is ``(log_emission, x, y, sigma, params, loop_penalty, network)`` for
-    :func:`~mapmatch.hmm.loops.collapse_kernel`, run on each piece's path.
+    ``loops`` is ``(log_emission, x, y, sigma, params, loop_penalty, network, scatter,
+    chosen distance)`` for :func:`~mapmatch.hmm.loops.collapse_kernel`, run on each piece's
+    path.
 
     Returns ``(row_ptr, edge, lo, hi, along, jumps, loops)``: the stretches of piece ``p``
     are rows ``row_ptr[p]:row_ptr[p + 1]``, ``along`` holds the distance along its path of
@@ -133,7 +134,7 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     along_all = np.empty(n_used)
     jumps = np.zeros(n_pieces, dtype=np.int64)
     removed = np.zeros(n_pieces, dtype=np.int64)
-    em_pad, ox, oy, osigma, params, loop_penalty, loop_net = loops
+    em_pad, ox, oy, osigma, params, loop_penalty, loop_net, scatter, chosen_dist = loops
     path_e, path_lo, path_hi = np.empty(64, dtype=np.int64), np.empty(64), np.empty(64)
     move_e, move_lo, move_hi = np.empty(64, dtype=np.int64), np.empty(64), np.empty(64)
     tail_e, tail_lo, tail_hi = np.empty(64, dtype=np.int64), np.empty(64), np.empty(64)
@@ -274,7 +275,10 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
                         n_path += 1
             along_all[t + 1] = done + path_hi[n_path - 1] - path_lo[n_path - 1]
         # loops the fixes do not support taken out (hmm/loops.py)
-        model = (start, used, states, em_pad, ox, oy, o_time, osigma, params, loop_penalty)
+        model = (
+            start, used, states, em_pad, ox, oy, o_time, osigma, params, loop_penalty,
+            scatter, chosen_dist,
+        )  # fmt: skip
         e, lo, hi, along_p, removed[p] = collapse_kernel(
             path_e[:n_path].copy(), path_lo[:n_path].copy(), path_hi[:n_path].copy(),
             along_all[start:stop], model, travel, loop_net,

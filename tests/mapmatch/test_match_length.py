@@ -193,3 +193,19 @@ def test_exact_fixes_just_past_a_junction_keep_their_metres(
     )
     trace = trace_of(x, y, time_s=t, heading=heading if with_heading else None)
     assert mapmatch.match(trace, net).matched_length_m == pytest.approx(216.0, rel=0.005)
+
+
+def test_exact_fixes_into_a_short_dead_end_and_back_keep_the_spur(tmp_path: Path) -> None:
+    # 25 m into a dead end at walking pace, exact fixes: the fixes there merge into a few
+    # observations, which at the assumed 5 m sigma a car held at the junction explains
+    # almost as well, and the 50 m spur was taken out; the scatter the trace shows (none)
+    # prices them now
+    roads = [
+        (1, [(-100.0, 0.0), (0.0, 0.0), (100.0, 0.0)], RESIDENTIAL),
+        (2, [(0.0, 0.0), (0.0, 25.0)], RESIDENTIAL),
+    ]
+    net = load(write_osm(tmp_path / "dead_end.osm", roads))
+    path = [(-100.0, 0.0), (0.0, 0.0), (0.0, 25.0), (0.0, 0.0), (100.0, 0.0)]
+    x, y, _, t = drive(path, speed_mps=2.5)
+    trace = trace_of(x, y, time_s=t)
+    assert mapmatch.match(trace, net).matched_length_m == pytest.approx(250.0, rel=0.005)
