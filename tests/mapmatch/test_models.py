@@ -7,7 +7,7 @@ from mapmatch.config import MatchConfig
 from mapmatch.errors import ConfigError
 from mapmatch.hmm.emission import heading_weight, log_emission, log_heading
 from mapmatch.hmm.routes import ROUTE_SAME_EDGE, ROUTE_UTURN, ROUTE_VIA_GRAPH, candidate_pairs
-from mapmatch.hmm.transition import driving_on_explains, log_transition
+from mapmatch.hmm.transition import TRAVEL_CHORD_SHARE, driving_on_explains, log_transition
 
 
 def test_emission_is_gaussian_in_distance() -> None:
@@ -117,14 +117,15 @@ def test_reported_travel_only_counts_outside_its_tolerance() -> None:
 
 def test_a_winding_route_that_the_travel_confirms_is_not_charged_for_its_chord() -> None:
     # 200 m of hairpin between fixes 20 m apart: the chord alone calls that 180 m of detour;
-    # an odometer that says 200 m (no slack) explains it, two speeds 15 s apart do not
+    # an odometer that says 200 m (no slack) explains all but a share of it, two speeds 15 s
+    # apart do not
     cfg = MatchConfig()
     args = (np.full(2, 20.0), np.full(2, 200.0), np.full(2, 15.0))
     kind, dt, sigma = np.full(2, ROUTE_VIA_GRAPH), np.full(2, 15.0), np.full(2, 5.0)
     travel = (np.full(2, 200.0), np.array([0.0, 100.0]))
     lt = log_transition(*args, kind, dt, sigma, cfg, travel)
     beta = cfg.beta_m + cfg.beta_per_s * 15.0 + cfg.beta_per_sigma * 5.0
-    assert lt.tolist() == pytest.approx([0.0, -180.0 / beta])
+    assert lt.tolist() == pytest.approx([-TRAVEL_CHORD_SHARE * 180.0 / beta, -180.0 / beta])
 
 
 def test_candidate_pairs_cover_every_pair_of_consecutive_fixes() -> None:
