@@ -250,7 +250,8 @@ def assemble(
     a = net.arrays
     c, used, states = solution.cands, solution.used, solution.states
     geom = network_geometry(net)
-    scatter = scatter_sigma_m(obs, solution)
+    chosen_m = chosen_distance_m(solution)
+    scatter = scatter_sigma_m(obs, solution, chosen_m)
     f8 = np.float64
     x = np.ascontiguousarray(x, f8)
     y = np.ascontiguousarray(y, f8)
@@ -279,7 +280,7 @@ def assemble(
         float(config.loop_penalty),
         loop_network(net),
         scatter,
-        chosen_distance_m(solution),
+        chosen_m,
     )
     chosen = solution.post[np.arange(len(used)), np.maximum(states, 0)]
     place = (

@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit
 
 from mapmatch.hmm.candidates import Candidates, find_candidates, sigma_radius_kernel
-from mapmatch.hmm.observations import Observations, Travel, merge_fixes
+from mapmatch.hmm.observations import Observations, Travel, merge_fixes, sigma_of_distances
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -271,7 +271,7 @@ def estimated_sigma_m(obs: Observations, cands: Candidates) -> float:
     if single.sum() < max(10, 0.5 * has.sum()):
         return float("nan")
     nearest = cands.distance_m[cands.ptr[:-1][single]]  # rows of a fix are nearest first
-    return float(1.4826 * np.median(nearest))
+    return sigma_of_distances(nearest)
 
 
 def with_sigma(fixes: Fixes, sigma_m: float, config: MatchConfig) -> Fixes:

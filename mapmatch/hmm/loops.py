@@ -30,7 +30,7 @@ from numba import njit
 
 from mapmatch.hmm.emission import distance_score
 from mapmatch.hmm.geometry import network_geometry, point_on_edge
-from mapmatch.hmm.observations import between_kernel, travel_arrays
+from mapmatch.hmm.observations import between_kernel, sigma_of_distances, travel_arrays
 from mapmatch.hmm.params import P_UTURN_PENALTY, model_params
 from mapmatch.hmm.transition import transition_score
 
@@ -407,6 +407,7 @@ def loop_model(
 ) -> tuple[Any, ...]:
     """The ``model`` argument of :func:`collapse_kernel` for the piece starting at ``start``."""
     f8 = np.float64
+    chosen_m = chosen_distance_m(solution)
     return (
         start,
         solution.used,
@@ -418,8 +419,8 @@ def loop_model(
         np.ascontiguousarray(obs.sigma_m, f8),
         model_params(config),
         float(config.loop_penalty),
-        scatter_sigma_m(obs, solution),
-        chosen_distance_m(solution),
+        scatter_sigma_m(obs, solution, chosen_m),
+        chosen_m,
     )
 
 
@@ -430,19 +431,20 @@ def chosen_distance_m(solution: Solution) -> FloatArray:
     return np.where(states >= 0, solution.cands.distance_m[rows], np.nan).astype(np.float64)
 
 
-def scatter_sigma_m(obs: Observations, solution: Solution) -> float:
+def scatter_sigma_m(obs: Observations, solution: Solution, chosen_m: FloatArray) -> float:
     """
     The position sigma the matched fixes show about their roads (inf: too few to tell).
 
-    1.4826 x the median distance of the chosen candidates from their observations (the
-    median absolute deviation of a Gaussian), each scaled by the square root of the
-    observation's fix count, since a centroid of ``m`` fixes scatters ``sqrt(m)`` times less.
+    :func:`~mapmatch.hmm.observations.sigma_of_distances` of the chosen candidates'
+    distances from their observations (``chosen_m``, :func:`chosen_distance_m`), each scaled
+    by the square root of the observation's fix count, since a centroid of ``m`` fixes
+    scatters ``sqrt(m)`` times less.
     """
     chosen = solution.states >= 0
     if np.count_nonzero(chosen) < SCATTER_MIN_OBSERVATIONS:
         return float("inf")
     fixes = obs.stop[solution.used[chosen]] - obs.first[solution.used[chosen]]
-    return float(1.4826 * np.median(chosen_distance_m(solution)[chosen] * np.sqrt(fixes)))
+    return sigma_of_distances(chosen_m[chosen] * np.sqrt(fixes))
 
 
 def collapse_loops(
