@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
@@ -65,11 +65,16 @@ class DistanceCheck:
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready members (NaN becomes ``None``)."""
-        out: dict[str, object] = asdict(self)
-        out["band"] = list(self.band)
-        if math.isnan(self.relative_error):
-            out["relative_error"] = None
-        return out
+        return {
+            "matched_length_m": self.matched_length_m,
+            "fused_length_m": self.fused_length_m,
+            "source": self.source,
+            "relative_error": None if math.isnan(self.relative_error) else self.relative_error,
+            "band": list(self.band),
+            "verdict": self.verdict,
+            "evidence": self.evidence,
+            "uturns": self.uturns,
+        }
 
 
 def chord_length_m(x: FloatArray, y: FloatArray) -> float:
@@ -102,8 +107,10 @@ def check_distance(
 
     The fused distance is, in order of preference, the odometer's last minus first known
     value, the caller's ``fused_distance_m``, or the chord sum. A verdict other than
-    ``pass`` is also logged as a warning, so a suspect meter never goes unseen; ``log=False``
-    leaves that to the caller (a live trip's running check, recomputed as it settles).
+    ``pass`` on a reported distance (odometer or caller) is also logged as a warning, so a
+    suspect meter never goes unseen; ``log=False`` leaves that to the caller (a live trip's
+    running check, recomputed as it settles). A chord sum is no meter (it cuts every curve
+    between fixes, so a sparse trace is always ``under``): its verdict is returned, not logged.
 
     Examples
     --------
@@ -131,7 +138,7 @@ def check_distance(
         verdict = "under"
     else:
         verdict = "pass"
-    if verdict != "pass" and log:
+    if verdict != "pass" and log and source != "chord":
         _log.warning(
             "trace %r: fused distance %.1f m (%s) vs matched %.1f m: relative error %s, %s",
             trace_id,

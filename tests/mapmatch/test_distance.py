@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+import dataclasses
+import logging
 import math
 
 import numpy as np
@@ -60,3 +62,24 @@ def test_zero_matched_length_gives_no_ratio() -> None:
 
 def test_chord_length_sums_straight_lines() -> None:
     assert chord_length_m(np.array([0.0, 3.0, 3.0]), np.array([0.0, 4.0, 10.0])) == 11.0
+
+
+def test_a_reported_distance_out_of_band_is_logged_a_chord_sum_is_not(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    with caplog.at_level(logging.WARNING, logger="mapmatch"):
+        assert _check().verdict == "under"  # type: ignore[attr-defined]
+        assert not caplog.records  # the chord cuts the curves: no meter to suspect
+        assert _check(fused_distance_m=950.0).verdict == "under"  # type: ignore[attr-defined]
+        assert _check(odometer_m=np.array([0.0, 1100.0])).verdict == "over"  # type: ignore[attr-defined]
+    assert [r.getMessage().split(":")[0] for r in caplog.records] == ["trace 't'"] * 2
+    assert "(caller)" in caplog.records[0].getMessage()
+    assert "(odometer)" in caplog.records[1].getMessage()
+
+
+def test_the_check_as_a_dict_has_every_member() -> None:
+    c = _check(fused_distance_m=990.0)
+    assert c.to_dict() == {  # type: ignore[attr-defined]
+        **{f.name: getattr(c, f.name) for f in dataclasses.fields(c)},  # type: ignore[arg-type]
+        "band": list(BAND),
+    }

@@ -2,6 +2,7 @@ from __future__ import annotations
 
 import math
 import pickle
+from types import MappingProxyType
 
 import numpy as np
 import pandas as pd
@@ -952,6 +953,23 @@ def test_point_records_give_what_the_table_path_gives(case: str) -> None:
     table = pd.DataFrame.from_records(records)
     reference = outcome(lambda: Trace.from_dataframe(table, trace_id="bus", crs="gcj02"))
     assert fast == reference
+
+
+@pytest.mark.parametrize("case", list(_RECORD_CASES), ids=list(_RECORD_CASES))
+def test_points_read_by_column_give_what_the_point_by_point_walk_gives(case: str) -> None:
+    records = _RECORD_CASES[case]
+    walked = record_columns([MappingProxyType(r) for r in records])  # not dicts: the walk
+    by_column = record_columns(records)
+    assert (by_column is None) == (walked is None)
+    if by_column is not None and walked is not None:
+        assert list(by_column) == list(walked)
+        for field, values in by_column.items():
+            other = walked[field]
+            if isinstance(values, np.ndarray):
+                assert isinstance(other, np.ndarray)
+                assert values.tobytes() == other.tobytes(), field
+            else:
+                assert values == other, field
 
 
 def test_plain_utc_text_times_and_numbers_need_no_pandas(monkeypatch: pytest.MonkeyPatch) -> None:
