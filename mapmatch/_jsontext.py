@@ -107,7 +107,7 @@ class Column(Protocol):
         """Every row's value as a Python object."""
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: a document makes some fifty, a frozen one costs 3x
 class Const:
     """The same value (a string, number, bool or ``None``) in every row."""
 
@@ -122,7 +122,7 @@ class Const:
         return [self.value] * rows
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: a document makes some fifty, a frozen one costs 3x
 class Ints:
     """Whole numbers; ``null`` outside ``valid``."""
 
@@ -572,7 +572,7 @@ def _spliced(text: bytes, fixes: list[tuple[int, int, str]], start: int) -> byte
     return b"".join(parts)
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: a document makes some fifty, a frozen one costs 3x
 class Floats:
     """
     Real numbers as ``repr`` writes them; ``null`` if not finite or not valid.
@@ -609,7 +609,7 @@ class Floats:
         return _nulls(values.tolist(), missing, None)
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: a document makes some fifty, a frozen one costs 3x
 class Bools:
     """``true`` / ``false``."""
 
@@ -652,7 +652,7 @@ class _Quotes(dict[str | None, str]):
 _QUOTES = _Quotes()
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: a document makes some fifty, a frozen one costs 3x
 class Strings:
     """Texts (escaped as ``json.dumps`` does, ASCII); ``null`` for ``None``."""
 
@@ -667,7 +667,7 @@ class Strings:
         return list(self.values)
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: a document makes some fifty, a frozen one costs 3x
 class Tuple:
     """
     ``[a, b, ...]`` of some columns per row, e.g. a position ``[lon, lat]``.
@@ -708,7 +708,7 @@ class Tuple:
         return _nulls(arrays, None if self.valid is None else ~self.valid, None)
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: a document makes some fifty, a frozen one costs 3x
 class Nested:
     """A JSON object per row, made by a table of the same rows."""
 
@@ -733,7 +733,7 @@ class Part(Protocol):
         """The items as Python objects."""
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: a document makes some fifty, a frozen one costs 3x
 class Values:
     """The rows of one column as the items of a JSON array (``v0,v1,...``)."""
 
@@ -749,7 +749,7 @@ class Values:
         return self.column.objects(self.rows)
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: a document makes some fifty, a frozen one costs 3x
 class Items:
     """
     Per row, a JSON array of a part of its own (a :class:`Table` or :class:`Values`).
@@ -776,7 +776,7 @@ class Items:
         return [{"type": self.geometry, "coordinates": items} for items in lists]
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: a document makes some fifty, a frozen one costs 3x
 class Table:
     """
     Rows of JSON objects with the same members: ``{name: value, ...}`` per row.

@@ -11,6 +11,7 @@ needs its length or its points never builds them.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -18,6 +19,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     import geopandas as gpd  # type: ignore[import-untyped]
+    import numpy.typing as npt
     import pandas as pd
 
     from mapmatch.config import MatchConfig
@@ -106,12 +108,10 @@ class EdgeAttributes:
     @classmethod
     def of_edges(cls, net: RoadNetwork, edge: IntArray) -> EdgeAttributes:
         """Read the attributes of network edges ``edge`` (array of edge indices)."""
-        from roadnets.drivable import ROAD_CLASSES
-
         a = net.arrays
         u, v, key = net.edge_osm_ids(edge)
         way = np.asarray(a.edge_way_id[edge], dtype=np.int64)
-        classes = np.asarray(ROAD_CLASSES, dtype=object)[a.edge_class[edge]]
+        classes = _road_classes()[a.edge_class[edge]]
         return cls(
             u=np.asarray(u, dtype=np.int64),
             v=np.asarray(v, dtype=np.int64),
@@ -122,6 +122,14 @@ class EdgeAttributes:
             road_class=tuple(classes.tolist()),
             name=tuple(net.way_names.names_of(way)),
         )
+
+
+@functools.cache
+def _road_classes() -> npt.NDArray[np.object_]:
+    """``roadnets.drivable.ROAD_CLASSES`` as an array to index with edge classes (made once)."""
+    from roadnets.drivable import ROAD_CLASSES
+
+    return np.asarray(ROAD_CLASSES, dtype=object)
 
 
 class Segment:
