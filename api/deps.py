@@ -17,6 +17,8 @@ import secrets
 from typing import TYPE_CHECKING, Annotated, TypeVar
 
 from fastapi import Depends, Request
+from fastapi.exceptions import RequestValidationError
+from pydantic import ValidationError
 
 from api.errors import RepeatedParameterError, UnauthorizedError
 from api.metrics import ServiceMetrics
@@ -32,6 +34,7 @@ T = TypeVar("T")
 
 __all__ = [
     "BearerToken",
+    "MatchQueryDep",
     "MetricsDep",
     "NetworksDep",
     "ReadyNetworksDep",
@@ -41,6 +44,8 @@ __all__ = [
     "get_networks",
     "get_service",
     "get_settings",
+    "match_query",
+    "match_query_parameters",
     "on_the_loop",
     "ready_networks",
     "single_valued_query",
@@ -179,3 +184,41 @@ async def single_valued_query(request: Request) -> None:
             "it once"
         )
         raise RepeatedParameterError(msg, field=f"query.{name}")
+
+
+def match_query(request: Request) -> MatchQuery:
+    """
+    The query parameters of ``POST /v1/match``, read into a :class:`MatchQuery` directly.
+
+    FastAPI's reading of a query model walks every field's annotation on every request
+    (about 0.6 ms of a 100-point match's 5 ms in the service, nearly all of it for an empty
+    query). This reads the parameters given, the list-valued ones as lists, and validates
+    once; a bad value is the same ``RequestValidationError`` (at ``query.<name>``) FastAPI
+    raises. :func:`match_query_parameters` documents them in OpenAPI.
+    """
+    params = request.query_params
+    if not params:
+        return MatchQuery()
+    given = {key: params.getlist(key) if key in _LISTS else params[key] for key in params}
+    try:
+        return MatchQuery.model_validate(given)
+    except ValidationError as exc:
+        errors = [{**e, "loc": ("query", *e["loc"])} for e in exc.errors(include_url=False)]
+        raise RequestValidationError(errors) from None
+
+
+def match_query_parameters() -> list[dict[str, object]]:
+    """The OpenAPI ``parameters`` of :func:`match_query`, from :class:`MatchQuery`'s schema."""
+    return [
+        {
+            "name": name,
+            "in": "query",
+            "required": False,
+            "schema": {k: v for k, v in prop.items() if k != "default"},
+            "description": prop.get("description", ""),
+        }
+        for name, prop in MatchQuery.model_json_schema()["properties"].items()
+    ]
+
+
+MatchQueryDep = Annotated[MatchQuery, Depends(match_query)]

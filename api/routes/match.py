@@ -2,22 +2,24 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Final
+from typing import Any, Final
 
-from fastapi import APIRouter, Depends, Query, Request
+from fastapi import APIRouter, Depends, Request
 from fastapi.responses import JSONResponse
 
 from api.deps import (
+    MatchQueryDep,
     MetricsDep,
     ReadyNetworksDep,
     ServiceDep,
     SettingsDep,
+    match_query_parameters,
     single_valued_query,
 )
 from api.intake import MEDIA_TYPES, BodyLimits, body_format, read_limited_body
 from api.middleware import SCOPE_KEY
 from api.routes.common import error_responses
-from api.schemas import MatchQuery, MatchResponse
+from api.schemas import MatchResponse
 
 __all__ = ["GEOJSON", "MATCH_REQUEST_BODY", "GeoJSONResponse", "router"]
 
@@ -77,11 +79,11 @@ router = APIRouter(tags=["match"])
         },
         **error_responses(400, 401, 404, 413, 415, 422, 500, 503, 504),
     },
-    openapi_extra={"requestBody": MATCH_REQUEST_BODY},
+    openapi_extra={"requestBody": MATCH_REQUEST_BODY, "parameters": match_query_parameters()},
 )
 async def match_trace(
     request: Request,
-    query: Annotated[MatchQuery, Query()],
+    query: MatchQueryDep,
     settings: SettingsDep,
     service: ServiceDep,
     metrics: MetricsDep,
