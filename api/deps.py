@@ -221,4 +221,4 @@ def match_query_parameters() -> list[dict[str, object]]:
     ]
 
 
-MatchQueryDep = Annotated[MatchQuery, Depends(match_query)]
+MatchQueryDep = Annotated[MatchQuery, Depends(on_the_loop(match_query))]
