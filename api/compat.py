@@ -177,7 +177,10 @@ async def run_compat(
         )
         return MatchOutcome.of(result, answer(Matched(parsed, result, net), options), started)
 
-    outcome = await service.runner.run(job)
+    length = request.headers.get("content-length", "")
+    # the coordinates come in the URL or a form body: their size picks the runner's lane
+    size = len(request.scope.get("query_string", b"")) + (int(length) if length.isdigit() else 0)
+    outcome = await service.runner.run(job, size=size)
     info = request.scope.get(SCOPE_KEY)
     if isinstance(info, dict):
         info.update(points=outcome.points, network=outcome.network, trace_id=outcome.trace_id)

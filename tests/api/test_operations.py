@@ -19,6 +19,7 @@ import pytest
 from api.errors import NotReadyError, ServiceError, UnknownNetworkError
 from api.networks import NetworkRegistry
 from api.server import listening_sockets
+from api.service import SHORT_JOB_BYTES
 from api.settings import Settings
 
 
@@ -179,6 +180,37 @@ def test_waiting_matches_are_bounded(
         assert second.status_code == 503
         assert second.json()["error"]["code"] == "overloaded"
         assert answers[0].status_code == 200  # the first one was not disturbed
+
+
+def test_a_long_trace_runs_beside_the_short_ones_which_share_one_thread(
+    start_thread_server, cache_dir: Path, slow_trace, trip, bodies
+) -> None:
+    settings = Settings(cache_dir=str(cache_dir), match_threads=2, max_queued=8, access_log=False)
+    slow_body = json.dumps({"points": bodies.points(slow_trace)}).encode()
+    short_body = json.dumps({"points": bodies.points(trip.trace)}).encode()
+    assert len(short_body) <= SHORT_JOB_BYTES < len(slow_body)
+    with start_thread_server(settings) as server:
+        url = server.base_url + "/v1/match"
+        headers = {"content-type": "application/json"}
+        slow: list[httpx.Response] = []
+        post = httpx.post
+        first = threading.Thread(
+            target=lambda: slow.append(post(url, content=slow_body, headers=headers, timeout=60))
+        )
+        first.start()
+        runner = server.app.state.service.runner
+        deadline = time.monotonic() + 30
+        while runner.in_system == 0 and time.monotonic() < deadline:
+            time.sleep(0.001)
+        for _ in range(3):  # answered while the long one still runs, in the short lane
+            answer = httpx.post(url, content=short_body, headers=headers, timeout=60)
+            assert answer.status_code == 200, answer.text[:300]
+        names = {t.name.rsplit("_", 1)[0] for t in threading.enumerate()}
+        long_running = first.is_alive()
+        first.join()
+        assert slow[0].status_code == 200
+        assert long_running  # the short ones did not wait for it
+        assert {"match", "match-long"} <= names
 
 
 def test_a_network_that_fails_to_load_keeps_the_process_alive(
