@@ -68,6 +68,7 @@ def uvicorn_config(
     log_level
         uvicorn's own log level.
     """
+    settings = settings.model_copy(update={"worker_processes": workers})
     return ServiceConfig(
         functools.partial(create_app, settings),
         factory=True,

@@ -27,6 +27,7 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+import os
 import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -68,6 +69,7 @@ __all__ = [
     "match_within",
     "parse_json",
     "past_budget",
+    "short_lane_threads",
     "validation_error",
 ]
 
@@ -139,32 +141,55 @@ class MatchOutcome:
 SHORT_JOB_BYTES = 65_536
 
 
+def short_lane_threads(match_threads: int, worker_processes: int) -> int:
+    """
+    How many short matches one worker runs at once: its share of the cores, at least one.
+
+    A match holds the interpreter lock except in its compiled kernels. With a core to itself
+    (workers as many as cores) a worker goes fastest one match at a time, as two contend for
+    the lock; alone on several cores, two together use the kernels' time on the other core
+    (16 clients, 100-point traces, 2 cores: 2 workers 250-253 requests/s with two at once,
+    268-279 with one; 1 worker 202-205 with two, 163-172 with one).
+
+    Examples
+    --------
+    >>> short_lane_threads(2, worker_processes=len(os.sched_getaffinity(0)))
+    1
+    """
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
+    return max(1, min(match_threads, cores // max(1, worker_processes)))
+
+
 class MatchRunner:
     """
     A bounded pool of match threads in two lanes; every job runs under a time budget.
 
-    Short jobs (bodies up to :data:`SHORT_JOB_BYTES`) run one at a time in their own thread,
-    long ones in the other ``threads - 1`` beside it (with one thread, every job shares it).
-    One match at a time is the fastest a process goes: two running together contend for the
-    interpreter lock (2 workers, 16 clients, 100-point traces: 285-287 requests/s with one
-    match thread, 250-253 with two), so the common short jobs keep that, and a long trace
-    still never holds them up.
+    Short jobs (bodies up to :data:`SHORT_JOB_BYTES`) run ``short_threads`` at a time in a
+    lane of their own, long ones in the other ``threads - short_threads`` threads beside
+    them, so a long trace never holds up the short ones and the short ones run no more at
+    once than is fastest (:func:`short_lane_threads`). With ``short_threads >= threads``
+    every job shares one pool.
 
     Parameters
     ----------
     threads
-        Jobs running at once (at most one short one).
+        Jobs running at once.
     max_queued
         Jobs waiting for a thread; one more is refused at once with :class:`OverloadedError`.
     budget_s
         Seconds a job may take from submission (waiting included).
+    short_threads
+        Short jobs running at once (default: all ``threads``, one pool).
     """
 
-    def __init__(self, *, threads: int, max_queued: int, budget_s: float) -> None:
-        self._short = ThreadPoolExecutor(max_workers=1, thread_name_prefix="match")
+    def __init__(
+        self, *, threads: int, max_queued: int, budget_s: float, short_threads: int | None = None
+    ) -> None:
+        short = threads if short_threads is None else max(1, min(short_threads, threads))
+        self._short = ThreadPoolExecutor(max_workers=short, thread_name_prefix="match")
         self._long = (
-            ThreadPoolExecutor(max_workers=threads - 1, thread_name_prefix="match-long")
-            if threads > 1
+            ThreadPoolExecutor(max_workers=threads - short, thread_name_prefix="match-long")
+            if short < threads
             else self._short
         )
         self._capacity = threads + max_queued
@@ -254,6 +279,7 @@ class MatchService:
             threads=settings.match_threads,
             max_queued=settings.max_queued,
             budget_s=settings.time_budget_s,
+            short_threads=short_lane_threads(settings.match_threads, settings.worker_processes),
         )
 
     async def submit(self, body: bytes, fmt: str, query: MatchQuery) -> MatchOutcome:

@@ -16,6 +16,8 @@ variable                        meaning
 ``MAPMATCH_MAX_POINTS``         most points in one trace (100 000)
 ``MAPMATCH_TIME_BUDGET_S``      seconds a match request may take, queueing included (30 s)
 ``MAPMATCH_MATCH_THREADS``      matches running at once in one worker process (2)
+``MAPMATCH_WORKER_PROCESSES``   worker processes on the machine (``serve --workers`` sets it;
+                                with one per core a worker runs one short match at a time)
 ``MAPMATCH_MAX_QUEUED``         matches waiting for a thread before 503 ``overloaded`` (64)
 ``MAPMATCH_MAX_DECOMPRESSED_BYTES``  largest body after gzip, bytes (40 MB)
 ``MAPMATCH_MAX_COLUMNS``        most columns of a CSV body (256)
@@ -103,11 +105,18 @@ class Settings(BaseSettings):
         default=2,
         ge=1,
         le=256,
-        description="Matches running at once in one process: short ones (bodies up to 64 KiB) "
-        "one at a time in their own thread, long ones in the others beside it, so a long trace "
-        "never holds up the short ones. Two matches at once only contend for the interpreter "
-        "lock (2 workers, 16 clients, 100-point traces: 250-253 requests/s with two threads "
-        "in one lane, 268-281 with these lanes or one thread).",
+        description="Matches running at once in one process. Short ones (bodies up to 64 KiB) "
+        "run in a lane of their own, as many at once as the worker's share of the cores (one "
+        "when there are as many workers as cores: two would only contend for the interpreter "
+        "lock), long ones in the other threads beside them, so a long trace never holds up "
+        "the short ones.",
+    )
+    worker_processes: int = Field(
+        default=1,
+        ge=1,
+        le=1024,
+        description="Worker processes serving on this machine; `mapmatch serve --workers` sets "
+        "it. With as many workers as cores each runs one short match at a time.",
     )
     max_queued: int = Field(
         default=64, ge=0, description="Matches waiting for a thread before 503 overloaded."

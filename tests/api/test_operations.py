@@ -185,7 +185,14 @@ def test_waiting_matches_are_bounded(
 def test_a_long_trace_runs_beside_the_short_ones_which_share_one_thread(
     start_thread_server, cache_dir: Path, slow_trace, trip, bodies
 ) -> None:
-    settings = Settings(cache_dir=str(cache_dir), match_threads=2, max_queued=8, access_log=False)
+    cores = len(os.sched_getaffinity(0))  # a worker per core: one short match at a time
+    settings = Settings(
+        cache_dir=str(cache_dir),
+        match_threads=2,
+        max_queued=8,
+        worker_processes=cores,
+        access_log=False,
+    )
     slow_body = json.dumps({"points": bodies.points(slow_trace)}).encode()
     short_body = json.dumps({"points": bodies.points(trip.trace)}).encode()
     assert len(short_body) <= SHORT_JOB_BYTES < len(slow_body)
