@@ -6,8 +6,9 @@ embedded network, its own compiled cache), warms it up, then runs ``--clients`` 
 clients for ``--duration-s`` seconds, each posting simulated 100-point 1 Hz traces (JSON) in a
 loop, once with httpx and once with a lean asyncio-streams client (``--client``; httpx's own
 CPU, on the same cores as the server, weighs on the figures). Prints a markdown table:
-requests/s, latency p50/p95/p99, error count (must be 0) and the server's memory (all its processes) before and after the run (must be flat). RSS counts the
-memory-mapped network once per process; PSS shares it out and is the honest total.
+requests/s, latency p50/p95/p99, error count (must be 0) and the server's memory (all its
+processes) before and after the run (must be flat). RSS counts the memory-mapped network once
+per process; PSS shares it out and is the honest total.
 
     .venv/bin/python benchmarks/bench_service.py          # 16 clients, 30 s, 1 and 2 workers
     .venv/bin/python benchmarks/bench_service.py --duration-s 5 --workers 1 --client raw
