@@ -122,44 +122,77 @@ def single_raw(df: pd.DataFrame, *, trace_id: str | None, id_column: str | None)
     return raw if trace_id is None else dataclasses.replace(raw, trace_id=trace_id)
 
 
-_NOT_UNIFORM = object()  # what :func:`_uniform_columns` answers when the general walk must decide
-
-
-def _uniform_columns(records: Sequence[Mapping[str, object]]) -> object:
+def _key_fields(keys: Iterable[Hashable]) -> dict[Hashable, str] | None:
     """
-    :func:`record_columns` of points that all have the same keys and only numbers, by column.
+    The field each key of the points names (``_IGNORED`` for none), in the keys' order.
 
-    The common body (every point the same fields, every value a plain number) is read one
-    column at a time, each key's values typed together, instead of one value at a time.
-    Anything else answers ``_NOT_UNIFORM`` for the general walk, which gives the same
-    columns (and ``None`` where it does).
+    ``None`` where the table path must decide: an id key (rows of a fleet, grouped or refused
+    there) or two keys for one field (it names both).
     """
-    first = records[0]
-    if type(first) is not dict:
-        return _NOT_UNIFORM
-    keys = first.keys()
-    if not all(type(r) is dict and r.keys() == keys for r in records):
-        return _NOT_UNIFORM
-    columns: dict[str, object] = {}
+    fields: dict[Hashable, str] = {}
+    named: set[str] = set()
     for key in keys:
         field = canonical(key)
         if field is None:
             if id_kind(key) is not None:
-                return None  # rows of a fleet: grouped (or refused) by the table path
+                return None
+            field = _IGNORED
+        elif field in named:
+            return None
+        else:
+            named.add(field)
+        fields[key] = field
+    return fields
+
+
+def _by_column(
+    records: Sequence[Mapping[str, object]], fields: dict[Hashable, str]
+) -> dict[str, object] | None:
+    """
+    The columns of points that all have the keys of ``fields``, read one column at a time.
+
+    Each key's values are typed together instead of one value at a time; ``None`` unless
+    every value is a plain number (the point-by-point walk then decides).
+    """
+    columns: dict[str, object] = {}
+    for key, field in fields.items():
+        if field is _IGNORED:
             continue
-        if field in columns:
-            return None  # two keys for one field: the table path names both
-        values = [r[key] for r in records]
+        values = [r[key] for r in records]  # type: ignore[index]
         kinds = set(map(type, values))
         if kinds == {float}:
             columns[field] = np.array(values, dtype=np.float64)
         elif kinds <= {float, int} and all(map(is_plain_number, values)):
             columns[field] = np.array([float(v) for v in values], dtype=np.float64)  # type: ignore[arg-type]
         else:
-            return _NOT_UNIFORM
-    if any(f not in columns for f in _REQUIRED):
-        return None
+            return None
     return columns
+
+
+def _by_value(
+    records: Sequence[Mapping[str, object]], fields: dict[Hashable, str]
+) -> dict[str, object] | None:
+    """The columns read one value at a time (text times allowed); ``None`` past any other."""
+    n = len(records)
+    named = (f for f in fields.values() if f is not _IGNORED)
+    columns: dict[str, list[object]] = {f: [math.nan] * n for f in named}
+    text_times = False
+    for i, record in enumerate(records):
+        for key, value in record.items():
+            field = fields[key]
+            if field is _IGNORED or value is None:
+                continue
+            if is_plain_number(value):
+                columns[field][i] = float(value)  # type: ignore[arg-type]
+            elif field == "time" and type(value) is str:
+                columns[field][i] = value
+                text_times = True
+            else:
+                return None
+    return {
+        field: values if field == "time" and text_times else np.array(values, dtype=np.float64)
+        for field, values in columns.items()
+    }
 
 
 def record_columns(records: Sequence[Mapping[str, object]]) -> dict[str, object] | None:
@@ -182,42 +215,15 @@ def record_columns(records: Sequence[Mapping[str, object]]) -> dict[str, object]
     >>> record_columns([{"trace_id": "a", "lat": 1.0, "lon": 2.0}] * 2) is None
     True
     """
-    n = len(records)
-    if n < 2:
+    if len(records) < 2:
         return None
-    uniform = _uniform_columns(records)
-    if uniform is not _NOT_UNIFORM:
-        return uniform  # type: ignore[return-value]
-    field_of: dict[object, str] = {}
-    columns: dict[str, list[object]] = {}
-    text_times = False
-    nan = math.nan
-    for i, record in enumerate(records):
-        for key, value in record.items():
-            field = field_of.get(key)
-            if field is None:
-                field = canonical(key)
-                if field is None:
-                    if id_kind(key) is not None:
-                        return None  # rows of a fleet: grouped (or refused) by the table path
-                    field = _IGNORED
-                elif field in columns:
-                    return None  # two keys for one field: the table path names both
-                else:
-                    columns[field] = [nan] * n
-                field_of[key] = field
-            if field is _IGNORED or value is None:
-                continue
-            if is_plain_number(value):
-                columns[field][i] = float(value)  # type: ignore[arg-type]
-            elif field == "time" and type(value) is str:
-                columns[field][i] = value
-                text_times = True
-            else:
-                return None
-    if any(f not in columns for f in _REQUIRED):
+    first = records[0]
+    same_keys = type(first) is dict and all(
+        type(r) is dict and r.keys() == first.keys() for r in records
+    )
+    keys = first.keys() if same_keys else dict.fromkeys(k for r in records for k in r)
+    fields = _key_fields(keys)
+    if fields is None or any(f not in fields.values() for f in _REQUIRED):
         return None
-    return {
-        field: values if field == "time" and text_times else np.array(values, dtype=np.float64)
-        for field, values in columns.items()
-    }
+    columns = _by_column(records, fields) if same_keys else None
+    return columns if columns is not None else _by_value(records, fields)
