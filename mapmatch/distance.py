@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
@@ -65,16 +65,14 @@ class DistanceCheck:
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready members (NaN becomes ``None``)."""
-        return {
-            "matched_length_m": self.matched_length_m,
-            "fused_length_m": self.fused_length_m,
-            "source": self.source,
-            "relative_error": None if math.isnan(self.relative_error) else self.relative_error,
-            "band": list(self.band),
-            "verdict": self.verdict,
-            "evidence": self.evidence,
-            "uturns": self.uturns,
-        }
+        out = {name: getattr(self, name) for name in _CHECK_FIELDS}  # asdict deep-copies
+        out["band"] = list(self.band)
+        if math.isnan(self.relative_error):
+            out["relative_error"] = None
+        return out
+
+
+_CHECK_FIELDS = tuple(f.name for f in fields(DistanceCheck))
 
 
 def chord_length_m(x: FloatArray, y: FloatArray) -> float:
