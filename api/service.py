@@ -27,7 +27,6 @@ from __future__ import annotations
 import asyncio
 import json
 import math
-import os
 import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -52,6 +51,7 @@ from api.polyline import PolylineError, decode, encode
 from api.schemas import MatchEnvelope, MatchQuery
 from mapmatch import OVERRIDABLE, ConfigError, InvalidTraceError, MatchConfig, TraceFileError
 from mapmatch.export import geojson_bytes
+from mapmatch.machine import available_cores
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -153,11 +153,10 @@ def short_lane_threads(match_threads: int, worker_processes: int) -> int:
 
     Examples
     --------
-    >>> short_lane_threads(2, worker_processes=len(os.sched_getaffinity(0)))
+    >>> short_lane_threads(2, worker_processes=available_cores())
     1
     """
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
-    return max(1, min(match_threads, cores // max(1, worker_processes)))
+    return max(1, min(match_threads, available_cores() // max(1, worker_processes)))
 
 
 class MatchRunner:

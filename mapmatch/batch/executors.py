@@ -34,6 +34,7 @@ from functools import partial
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 from mapmatch.errors import MapMatchError
+from mapmatch.machine import available_cores
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Generator, Iterator, Sequence
@@ -61,14 +62,6 @@ class SchedulerError(MapMatchError, OSError):
 
 class WorkerLostError(MapMatchError, RuntimeError):
     """The worker process running a task died, and died again when the task ran alone."""
-
-
-def available_cores() -> int:
-    """Cores this process may run on (its CPU affinity), at least 1."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
 
 
 class Executor(Protocol):

@@ -17,6 +17,7 @@ import os
 from typing import TYPE_CHECKING, Any
 
 import roadnets
+from mapmatch.machine import available_cores
 
 if TYPE_CHECKING:
     from api.settings import Settings
@@ -40,9 +41,9 @@ def _port(text: str) -> int:
 
 
 def _workers(text: str) -> int:
-    """A worker count >= 1, or ``auto``: one per core this process may run on."""
+    """A worker count >= 1, or ``auto``: one per core this process may use."""
     if text.strip().lower() == "auto":
-        return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1)
+        return available_cores()
     try:
         count = int(text)
     except ValueError:
@@ -81,8 +82,11 @@ def add_parser(sub: Any) -> None:
         type=_workers,
         default=1,
         metavar="N",
-        help="worker processes, or 'auto' for one per core (default 1); matching holds the "
-        "GIL, so processes, not threads, use more cores",
+        help="worker processes, or 'auto': one per core this process may use (its CPU "
+        "affinity, cut to a container's CPU quota); default 1, as a live trip (/v1/trips) "
+        "lives in the worker that opened it; matching holds the GIL, so processes, not "
+        "threads, use more cores; each worker holds about 300 MB of its own with the embedded "
+        "network",
     )
     parser.add_argument("--cache-dir", default=None, help="folder of compiled networks")
     parser.add_argument(
