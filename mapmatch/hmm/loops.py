@@ -17,8 +17,7 @@ loop, far from its start, and keeps it easily. A loop that a turn restriction fo
 only legal way round a banned turn) is never taken out.
 
 Compiled (:func:`collapse_kernel`): the path walk of :mod:`mapmatch.hmm.pathwalk` runs it on
-every piece that passes a place twice; :func:`collapse_loops` is the same on a list of
-stretches.
+every piece that passes a place twice.
 """
 
 from __future__ import annotations
@@ -30,14 +29,13 @@ from numba import njit
 
 from mapmatch.hmm.emission import distance_score
 from mapmatch.hmm.geometry import network_geometry, point_on_edge
-from mapmatch.hmm.observations import between_kernel, sigma_of_distances, travel_arrays
-from mapmatch.hmm.params import P_UTURN_PENALTY, model_params
+from mapmatch.hmm.observations import between_kernel, sigma_of_distances
+from mapmatch.hmm.params import P_UTURN_PENALTY
 from mapmatch.hmm.transition import transition_score
 
 if TYPE_CHECKING:
     from typing import Any
 
-    from mapmatch.config import MatchConfig
     from mapmatch.hmm.observations import Observations
     from mapmatch.hmm.solution import Solution
     from mapmatch.types import FloatArray
@@ -47,8 +45,6 @@ __all__ = [
     "SCATTER_MIN_OBSERVATIONS",
     "chosen_distance_m",
     "collapse_kernel",
-    "collapse_loops",
-    "loop_model",
     "loop_network",
     "pairwise_sum",
     "scatter_sigma_m",
@@ -351,8 +347,8 @@ def collapse_kernel(e, lo, hi, along, model, travel, net):  # type: ignore[no-un
 
     ``(e, lo, hi)`` are the path's stretches and ``along`` the distance along it of each of
     the piece's observations; ``model`` is ``(start, used, states, log_emission, x, y, time,
-    sigma, params, loop_penalty, scatter, chosen distance)`` of the solution and its
-    observations (:func:`loop_model`), ``travel`` their
+    sigma, params, loop_penalty, scatter, chosen distance)`` of the solution (the piece
+    starting at used position ``start``) and its observations, ``travel`` their
     travel arrays, ``net`` :func:`loop_network`. Returns the new stretches and distances and
     how many loops were taken out. The innermost loops go first; each one taken out leaves
     its observations at its node.
@@ -402,28 +398,6 @@ def loop_network(net: RoadNetwork) -> tuple[Any, ...]:
     )
 
 
-def loop_model(
-    obs: Observations, solution: Solution, start: int, config: MatchConfig
-) -> tuple[Any, ...]:
-    """The ``model`` argument of :func:`collapse_kernel` for the piece starting at ``start``."""
-    f8 = np.float64
-    chosen_m = chosen_distance_m(solution)
-    return (
-        start,
-        solution.used,
-        solution.states,
-        np.ascontiguousarray(solution.log_emission, f8),
-        np.ascontiguousarray(obs.x, f8),
-        np.ascontiguousarray(obs.y, f8),
-        np.ascontiguousarray(obs.time_s, f8),
-        np.ascontiguousarray(obs.sigma_m, f8),
-        model_params(config),
-        float(config.loop_penalty),
-        scatter_sigma_m(obs, solution, chosen_m),
-        chosen_m,
-    )
-
-
 def chosen_distance_m(solution: Solution) -> FloatArray:
     """Distance of each used observation's chosen candidate from it (NaN: none chosen)."""
     states = solution.states
@@ -445,34 +419,3 @@ def scatter_sigma_m(obs: Observations, solution: Solution, chosen_m: FloatArray)
         return float("inf")
     fixes = obs.stop[solution.used[chosen]] - obs.first[solution.used[chosen]]
     return sigma_of_distances(chosen_m[chosen] * np.sqrt(fixes))
-
-
-def collapse_loops(
-    net: RoadNetwork,
-    obs: Observations,
-    solution: Solution,
-    start: int,
-    entries: list[list[float]],
-    along: FloatArray,
-    config: MatchConfig,
-) -> tuple[list[list[float]], FloatArray, int]:
-    """
-    Take out the loops of one piece's path that do not pay for themselves.
-
-    ``entries`` are the path's ``[edge, start, end]`` stretches and ``along`` the distance
-    along it of each of the piece's observations (the piece starts at used position
-    ``start``). Returns the new stretches and distances, and how many loops were taken out.
-    The innermost loops go first; each one taken out leaves its observations at its node.
-    """
-    table = np.array(entries, dtype=np.float64).reshape(-1, 3)
-    e, lo, hi, along_m, removed = collapse_kernel(
-        table[:, 0].astype(np.int64),
-        np.ascontiguousarray(table[:, 1]),
-        np.ascontiguousarray(table[:, 2]),
-        np.ascontiguousarray(along, np.float64),
-        loop_model(obs, solution, start, config),
-        travel_arrays(obs.travel),
-        loop_network(net),
-    )
-    out = [[int(k), float(s), float(t)] for k, s, t in zip(e, lo, hi, strict=True)]
-    return out, np.asarray(along_m, dtype=np.float64), int(removed)
