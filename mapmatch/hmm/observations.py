@@ -59,7 +59,13 @@ TRUSTED_SLACK_FRAC = 0.25
 
 @njit(cache=True, nogil=True)
 def between_kernel(index, odometer, speed_m, slack_m, unknown_lo, unknown_hi):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """:meth:`Travel.between` over a travel's arrays (:func:`travel_arrays`; absent: empty)."""
+    """
+    Travel and slack between consecutive points ``index`` (NaN travel where unknown).
+
+    The :class:`Travel` is given as its arrays (:func:`travel_arrays`; absent ones empty):
+    the odometer's increment where both readings are known, else the speed integral where
+    it is known all the way.
+    """
     m = max(len(index) - 1, 0)
     travel = np.full(m, np.nan)
     slack = np.zeros(m)
@@ -111,11 +117,6 @@ class Travel:
     slack_m: FloatArray | None
     unknown_lo: IntArray | None
     unknown_hi: IntArray | None
-
-    def between(self, index: IntArray) -> tuple[FloatArray, FloatArray]:
-        """Travel and slack between consecutive points ``index`` (NaN travel where unknown)."""
-        travel, slack = between_kernel(np.ascontiguousarray(index, np.int64), *travel_arrays(self))
-        return travel, slack
 
 
 @dataclass(frozen=True, slots=True)
