@@ -30,6 +30,7 @@ from starlette.responses import JSONResponse, Response
 
 from api.deps import get_metrics, get_service
 from api.errors import INTERNAL_ERROR, OptionError, error_answer, rule_for
+from api.intake import declared_length
 from api.middleware import SCOPE_KEY
 from api.service import MatchOutcome
 from mapmatch import ConfigError, MatchConfig
@@ -177,9 +178,8 @@ async def run_compat(
         )
         return MatchOutcome.of(result, answer(Matched(parsed, result, net), options), started)
 
-    length = request.headers.get("content-length", "")
     # the coordinates come in the URL or a form body: their size picks the runner's lane
-    size = len(request.scope.get("query_string", b"")) + (int(length) if length.isdigit() else 0)
+    size = len(request.scope.get("query_string", b"")) + (declared_length(request) or 0)
     outcome = await service.runner.run(job, size=size)
     info = request.scope.get(SCOPE_KEY)
     if isinstance(info, dict):

@@ -54,7 +54,7 @@ if TYPE_CHECKING:
 
     from api.settings import Settings
 
-__all__ = ["MEDIA_TYPES", "BodyLimits", "body_format", "read_limited_body"]
+__all__ = ["MEDIA_TYPES", "BodyLimits", "body_format", "declared_length", "read_limited_body"]
 
 #: Content types ``POST /v1/match`` reads, and the trace format of each.
 MEDIA_TYPES: Final[Mapping[str, str]] = {
@@ -245,6 +245,12 @@ def _encoding(request: Request) -> bool:
     raise UnsupportedEncodingError(msg, field="Content-Encoding")
 
 
+def declared_length(request: Request) -> int | None:
+    """The body size the request's ``Content-Length`` declares; ``None`` without a number."""
+    declared = request.headers.get("content-length", "")
+    return int(declared) if declared.isdigit() else None
+
+
 async def read_limited_body(request: Request, fmt: str, limits: BodyLimits) -> bytes:
     """
     The request body, decompressed, refused as soon as it would cost more than ``limits``.
@@ -273,9 +279,9 @@ async def read_limited_body(request: Request, fmt: str, limits: BodyLimits) -> b
     """
     gzipped = _encoding(request)
     msg = f"the body is larger than this service accepts ({limits.max_body_bytes:,} bytes)"
-    declared = request.headers.get("content-length", "")
-    if declared.isdigit() and int(declared) > limits.max_body_bytes:
-        msg = f"{msg}: Content-Length is {int(declared):,}; send less"
+    declared = declared_length(request)
+    if declared is not None and declared > limits.max_body_bytes:
+        msg = f"{msg}: Content-Length is {declared:,}; send less"
         raise BodyTooLargeError(msg)
     counter = _Counter(fmt, limits)
     inflater = _Inflater(limits.max_decompressed_bytes, declared=True) if gzipped else None
