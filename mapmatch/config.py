@@ -343,6 +343,18 @@ class MatchConfig:
         le=100,
         overridable=True,
     )
+    odometer_end_sigmas: float = _param(
+        2.0,
+        doc="the path's first and last point move along their roads, by at most this many "
+        "sigmas, to where the odometer readings of all the piece's fixes put them (a line "
+        "through their places along the path against the readings, scale free): at 15 s "
+        "one noisy end fix no longer sets the matched length alone; 0 keeps the ends at "
+        "the end fixes' projections",
+        unit="sigmas",
+        ge=0,
+        le=100,
+        overridable=True,
+    )
     outlier_sigmas: float = _param(
         5.0,
         doc="a fix this many sigmas from its neighbours that sticks out from them is an outlier",

@@ -3,8 +3,8 @@
 The facade over the stages of :mod:`mapmatch.hmm` (docs/DESIGN.md shows the data flow):
 the fixes in metres with their model inputs, merged into observations with their candidates
 (one R-tree query); displaced observations left out; the trellis scored and solved, breaks
-repaired; the solution assembled into driven edges and per-fix positions; the matched length
-held against the fused trip distance.
+repaired; the solution assembled into driven edges and per-fix positions, the path's ends
+placed by the odometer; the matched length held against the fused trip distance.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from mapmatch.config import MatchConfig
 from mapmatch.distance import Evidence, check_distance, chord_length_m
 from mapmatch.errors import DeadlineExceededError, NoCandidatesError
 from mapmatch.hmm.assemble import assemble
+from mapmatch.hmm.ends import odometer_ends
 from mapmatch.hmm.fixes import (
     Fixes,
     estimated_sigma_m,
@@ -158,9 +159,11 @@ def match(
         config,
     )
     _check_deadline(deadline, trace, "assembly")
-    matched_length = float(sum(s.length_m for s in assembled.segments))
-    points = assembled.points
-    complete = len(assembled.segments) == 1 and bool(points.matched[0] and points.matched[-1])
+    segments, points = odometer_ends(
+        net, assembled.segments, assembled.points, trace.odometer_m, config
+    )
+    matched_length = float(sum(s.length_m for s in segments))
+    complete = len(segments) == 1 and bool(points.matched[0] and points.matched[-1])
     check = check_distance(
         trace_id=trace.trace_id,
         matched_length_m=matched_length,
@@ -170,7 +173,7 @@ def match(
         fused_distance_m=fused_distance_m,
         chord_m=chord_length_m(x, y),
         evidence=_evidence(trace, fixes, config),
-        uturns=_uturns(net, assembled.segments),
+        uturns=_uturns(net, segments),
     )
     _lap(timings, "result", clock)
     timings["total"] = sum(timings.values())
@@ -193,9 +196,9 @@ def match(
     return MatchResult(
         trace_id=trace.trace_id,
         network=_network_ids(net),
-        segments=assembled.segments,
+        segments=segments,
         points=points,
-        breaks=[s.first for s in assembled.segments[1:]],
+        breaks=[s.first for s in segments[1:]],
         matched_length_m=matched_length,
         distance_check=check,
         stats=stats,

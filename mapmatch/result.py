@@ -223,7 +223,7 @@ class Segment:
 
     @property
     def length_m(self) -> float:
-        """Metres along the path, from the first fix's projection to the last's."""
+        """Metres along the path, from the first fix's place to the last's."""
         return float(sum((self.end_offset_m - self.start_offset_m).tolist()))
 
     @property
@@ -486,7 +486,8 @@ class MatchResult:
     breaks
         Fix indices where the trace was split (the first fix of every segment but the first).
     matched_length_m
-        Metres along the matched edges, from the first fix's projection to the last's,
+        Metres along the matched edges, from the first fix's projection to the last's
+        (with an odometer, from where the fixes' readings put them: :mod:`mapmatch.hmm.ends`),
         summed over segments.
     distance_check
         The fused trip distance against :attr:`matched_length_m`.

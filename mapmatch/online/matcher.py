@@ -93,6 +93,7 @@ from mapmatch.config import MatchConfig
 from mapmatch.distance import DistanceCheck, check_distance, chord_length_m
 from mapmatch.errors import ConfigError, InputTypeError, InvalidTraceError, NoCandidatesError
 from mapmatch.hmm.emission import emissions
+from mapmatch.hmm.ends import odometer_ends
 from mapmatch.hmm.fixes import hold_limit_m
 from mapmatch.hmm.routes import ROUTE_STANDSTILL
 from mapmatch.hmm.selection import find_displaced
@@ -116,7 +117,7 @@ if TYPE_CHECKING:
     from mapmatch.distance import Evidence
     from mapmatch.hmm.candidates import Candidates
     from mapmatch.online.window import WindowSolve
-    from mapmatch.types import BoolArray, IntArray
+    from mapmatch.types import BoolArray, FloatArray, IntArray
     from roadnets import RoadNetwork
 
 __all__ = [
@@ -661,7 +662,7 @@ class OnlineMatcher:
         points = _slice_points(asm.points, open_first, stop)
         of = points.segment
         points = dataclasses.replace(points, segment=np.where(of >= 0, of + base_segment, -1))
-        self._record.add_points(points)
+        self._record.add_points(points, _readings(model, open_first, stop))
         out.points.append(points)
         self._count(rnd, ws, open_first, stop)
         self._segment = base_segment + piece
@@ -789,7 +790,7 @@ class OnlineMatcher:
                 return out
             stop = int(obs.stop[old[-1]])
         points = _unmatched_points(model, rnd.outlier[model.obs.of_fix], open_first, stop)
-        self._record.add_points(points)
+        self._record.add_points(points, _readings(model, open_first, stop))
         out.points.append(points)
         self._candidates += int(
             rnd.cands.counts[(obs.first >= open_first) & (obs.stop <= stop)].sum()
@@ -1002,13 +1003,18 @@ class OnlineMatcher:
             radius = float(model.fixes.radius_m.max()) if model else self.config.search_radius_m
             self._failure = NoCandidatesError(self.trip_id, radius)
             raise self._failure
-        segments = self._record.segments(self.net)
-        points = self._record.points()
-        matched_length = float(sum(s.length_m for s in segments))
-        complete = len(segments) == 1 and bool(points.matched[[0, -1]].all())
         odometer = None
         if not math.isnan(self._odometer[0]):
             odometer = np.array(self._odometer)
+        segments, points = odometer_ends(
+            self.net,
+            self._record.segments(self.net),
+            self._record.points(),
+            self._record.odometer_m(),
+            self.config,
+        )
+        matched_length = float(sum(s.length_m for s in segments))
+        complete = len(segments) == 1 and bool(points.matched[[0, -1]].all())
         store = self._tail.store
         chord = self._settled_chord_m
         if store.base == 0 and model is not None:  # the whole trip is at hand: as match sums it
@@ -1106,6 +1112,12 @@ def _matched_edge(attrs: EdgeAttributes, i: int, edge: int, lo: float, hi: float
         road_class=attrs.road_class[i],
         speed_limit_kph=float(attrs.speed_limit_kph[i]),
     )
+
+
+def _readings(model: TailModel, lo: int, hi: int) -> FloatArray | None:
+    """The odometer readings of fixes ``lo..hi-1`` of the tail (``None``: the trip has none)."""
+    odometer = model.view.odometer_m
+    return None if odometer is None else odometer[lo:hi]
 
 
 def _slice_points(points: MatchedPoints, lo: int, hi: int) -> MatchedPoints:

@@ -64,6 +64,7 @@ class Record:
         self._twin = edge_twin
         self._paths: list[_Path] = []
         self._chunks: list[MatchedPoints] = []
+        self._readings: list[FloatArray] = []  # the settled fixes' odometer (NaN: none)
         self.fixes = 0
         self.length_m = 0.0
         self.uturns = 0  # an edge followed by its reverse twin, within a segment
@@ -74,16 +75,19 @@ class Record:
         """Segments settled so far (the last may still grow)."""
         return len(self._paths)
 
-    def add_points(self, points: MatchedPoints) -> None:
-        """Append the outcome of the next settled fixes."""
-        if not len(points.time_s):
+    def add_points(self, points: MatchedPoints, odometer_m: FloatArray | None) -> None:
+        """Append the outcome of the next settled fixes, and their odometer readings."""
+        n = len(points.time_s)
+        if not n:
             return
         if not self.fixes:
             self.first_matched = bool(points.matched[0])
         self._chunks.append(points)
-        self.fixes += len(points.time_s)
+        self._readings.append(np.full(n, np.nan) if odometer_m is None else odometer_m.copy())
+        self.fixes += n
         if len(self._chunks) > _COMPACT_CHUNKS:
             self._chunks = [concat_points(self._chunks)]
+            self._readings = [np.concatenate(self._readings)]
 
     def add_path(
         self,
@@ -155,8 +159,15 @@ class Record:
         self._chunks = [concat_points(self._chunks)] if self._chunks else []
         return self._chunks[0] if self._chunks else empty_points()
 
+    def odometer_m(self) -> FloatArray | None:
+        """Every settled fix's odometer reading (NaN where it had none); ``None``: no reading."""
+        self._readings = [np.concatenate(self._readings)] if self._readings else []
+        readings = self._readings[0] if self._readings else np.empty(0)
+        return readings if np.isfinite(readings).any() else None
+
     @property
     def nbytes(self) -> int:
         """Bytes held (approximately: the arrays, and 24 bytes per stretch)."""
         arrays = sum(int(getattr(c, n).nbytes) for c in self._chunks for n in _POINT_FIELDS)
+        arrays += sum(int(r.nbytes) for r in self._readings)
         return arrays + sum(72 * len(p.edge) + 200 for p in self._paths) + 150 * len(self._chunks)

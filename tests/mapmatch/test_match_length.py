@@ -16,7 +16,8 @@ import roadnets
 from mapmatch.evaluation.accuracy.conditions import condition_config
 from mapmatch.evaluation.scoring import score_geojson
 from mapmatch.evaluation.simulate import SimulationConfig, simulate_trips, strip_to_class
-from tests.mapmatch.toy import drive, load, trace_of, write_osm
+from mapmatch.hmm.ends import odometer_fit
+from tests.mapmatch.toy import drive, load, lonlat, trace_of, write_osm
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -209,3 +210,69 @@ def test_exact_fixes_into_a_short_dead_end_and_back_keep_the_spur(tmp_path: Path
     x, y, _, t = drive(path, speed_mps=2.5)
     trace = trace_of(x, y, time_s=t)
     assert mapmatch.match(trace, net).matched_length_m == pytest.approx(250.0, rel=0.005)
+
+
+def _sparse_drive_with_odometer(ends_off_m: tuple[float, float], scale: float) -> mapmatch.Trace:
+    """
+    A 15 s trace along 2.4 km of road, the first and last fix displaced along it by ``ends_off_m``.
+
+    The other fixes lie within 3 m across the road; the odometer reads ``scale`` x the
+    distance driven.
+    """
+    x, _, _, t = drive([(50.0, 0.0), (2450.0, 0.0)], speed_mps=10.0, interval_s=15.0)
+    y = np.random.default_rng(4).normal(0.0, 3.0, len(x))
+    odometer = scale * (x - x[0])
+    shifted = x.copy()
+    shifted[0] += ends_off_m[0]
+    shifted[-1] += ends_off_m[1]
+    lon, lat = lonlat(shifted, y)
+    return mapmatch.Trace(time=1.7e9 + t, lon=lon, lat=lat, odometer=odometer, trace_id="odo")
+
+
+def _road(tmp_path: Path) -> roadnets.RoadNetwork:
+    """A 2.6 km road with side streets at 1 and 2 km."""
+    ways = [(1, [(0, 0), (1000, 0), (2000, 0), (2600, 0)], PRIMARY)]
+    ways += [(10 + i, [(xc, 0), (xc, 200)], RESIDENTIAL) for i, xc in enumerate((1000, 2000))]
+    return load(write_osm(tmp_path / "road.osm", ways))
+
+
+#: The ends where the fixes lie: the path ends at the end fixes' projections.
+_AT_FIXES = mapmatch.MatchConfig(odometer_end_sigmas=0.0)
+
+
+@pytest.mark.parametrize("scale", [1.0, 1.02, 0.97])
+def test_the_odometer_places_the_ends_of_a_sparse_trace(tmp_path: Path, scale: float) -> None:
+    net = _road(tmp_path)
+    true_length = mapmatch.match(_sparse_drive_with_odometer((0.0, 0.0), scale), net, _AT_FIXES)
+    trace = _sparse_drive_with_odometer((8.0, -8.0), scale)  # each end fix 8 m inside the trip
+    at_fixes = mapmatch.match(trace, net, _AT_FIXES)
+    fitted = mapmatch.match(trace, net)
+    assert at_fixes.matched_length_m == pytest.approx(true_length.matched_length_m - 16.0, abs=1)
+    # the readings of every fix move the ends back out, whatever the odometer's scale (the
+    # end fixes' own readings are in the fit: 5.5 of their 8 m)
+    assert fitted.matched_length_m == pytest.approx(true_length.matched_length_m - 5.0, abs=1.5)
+    assert fitted.points.offset_m[0] < at_fixes.points.offset_m[0] - 5.0  # the first fix too
+    assert fitted.segments[0].start_offset_m[0] == pytest.approx(fitted.points.offset_m[0])
+
+
+def test_the_odometer_moves_an_end_no_more_than_its_sigmas(tmp_path: Path) -> None:
+    net = _road(tmp_path)
+    trace = _sparse_drive_with_odometer((40.0, 0.0), 1.0)
+    at_fixes = mapmatch.match(trace, net, _AT_FIXES)
+    fitted = mapmatch.match(trace, net)  # sigma 5 m: an end moves 10 m at most
+    assert fitted.matched_length_m == pytest.approx(at_fixes.matched_length_m + 10.0, abs=0.5)
+
+
+def test_the_odometer_fit_leaves_out_what_does_not_follow_it() -> None:
+    odometer = np.arange(8) * 150.0
+    along = odometer * 0.98 + 12.0  # a 2 % high odometer, the path starting 12 m early
+    along[3] += 60.0  # and one fix far off the line
+    along[[1, 5]] += [2.0, -2.0]  # two a little off it
+    sigma = 5.0
+    start, scale, spread = odometer_fit(along, odometer, sigma)
+    assert (start, scale) == (pytest.approx(12.0, abs=1.0), pytest.approx(0.98, abs=2e-3))
+    assert spread == sigma  # the residuals are smaller than sigma
+    assert np.isnan(odometer_fit(along, odometer * 2.0, sigma)[0])  # not the road measured
+    assert np.isnan(odometer_fit(along[:2], odometer[:2], sigma)[0])  # too few readings
+    odometer[0] = np.nan
+    assert np.isnan(odometer_fit(along, odometer, sigma)[0])  # the first reading unknown

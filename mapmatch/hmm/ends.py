@@ -1,0 +1,203 @@
+"""The ends of a matched path placed where the odometer puts them.
+
+At 15-30 s sampling the matched length runs from the first fix's projection to the last's,
+so the along-road error of those two fixes alone (10-20 m each) sets the length's error: more
+than 1 % of a 3 km trip. An odometer says how far the car went between every pair of fixes;
+a line through every fix's place along the path against its reading (the scale left free, so
+an odometer reading a few per cent high or low moves nothing) puts the two ends where all the
+fixes agree they were. Each end moves along its own road only (never from a junction, never
+past one) and by at most a few sigmas, and the end fixes move with it.
+
+This works on a finished match (its segments and per-fix places), so the live matcher's
+close applies it to its record exactly as :func:`mapmatch.match` does to its own.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numba import njit
+
+from mapmatch.result import MatchedPoints, Segment
+
+if TYPE_CHECKING:
+    from mapmatch.config import MatchConfig
+    from mapmatch.types import FloatArray
+    from roadnets import RoadNetwork
+
+__all__ = ["odometer_ends", "odometer_fit"]
+
+#: Fewer readings than this on a segment leave its ends where they are.
+MIN_READINGS = 3
+#: The shortest stretch an end correction leaves (metres).
+MIN_STRETCH_M = 0.5
+#: A reading farther off the fitted line than this many residual scales is left out.
+REJECT_SCALES = 3.0
+
+
+@njit(cache=True, nogil=True)
+def odometer_fit(along, odometer, sigma):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """
+    A line ``along = a + b * (odometer - odometer[0])`` through places and readings.
+
+    Least squares; readings farther off it than 3 x the residual scale (1.4826 x the median
+    absolute residual, at least ``sigma``) are left out and the line fitted again, three
+    times. Returns ``(a, b, scale)``, or NaNs when fewer than three readings remain, they
+    span no distance, or ``b`` is not within 0.8 .. 1.25 (the path is not the road the
+    odometer measured).
+    """
+    n = len(along)
+    keep = np.zeros(n, dtype=np.bool_)
+    for k in range(n):
+        keep[k] = np.isfinite(odometer[k]) and np.isfinite(along[k])
+    if n < MIN_READINGS or not np.isfinite(odometer[0]):
+        return np.nan, np.nan, np.nan
+    base = odometer[0]
+    a = b = scale = np.nan
+    residual = np.empty(n)
+    for _ in range(3):
+        count = 0
+        sx = sy = 0.0
+        for k in range(n):
+            if keep[k]:
+                count += 1
+                sx += odometer[k] - base
+                sy += along[k]
+        if count < MIN_READINGS:
+            return np.nan, np.nan, np.nan
+        mx, my = sx / count, sy / count
+        sxx = sxy = 0.0
+        for k in range(n):
+            if keep[k]:
+                dx = odometer[k] - base - mx
+                sxx += dx * dx
+                sxy += dx * (along[k] - my)
+        if sxx <= 0.0:
+            return np.nan, np.nan, np.nan
+        b = sxy / sxx
+        a = my - b * mx
+        m = 0
+        for k in range(n):
+            if keep[k]:
+                residual[m] = abs(along[k] - a - b * (odometer[k] - base))
+                m += 1
+        scale = max(sigma, 1.4826 * np.median(residual[:m]))
+        for k in range(n):
+            if np.isfinite(odometer[k]) and np.isfinite(along[k]):
+                keep[k] = abs(along[k] - a - b * (odometer[k] - base)) <= REJECT_SCALES * scale
+    if not 0.8 <= b <= 1.25:
+        return np.nan, np.nan, np.nan
+    return a, b, scale
+
+
+@njit(cache=True, nogil=True)
+def _along(edge, lo, hi, fix_edge, fix_off):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """Each fix's distance along the stretches, searched forward from the last one's (NaN: off)."""
+    n = len(fix_edge)
+    out = np.full(n, np.nan)
+    base = np.empty(len(edge) + 1)
+    base[0] = 0.0
+    for i in range(len(edge)):
+        base[i + 1] = base[i] + hi[i] - lo[i]
+    at = 0
+    for j in range(n):
+        for i in range(at, len(edge)):
+            if edge[i] == fix_edge[j] and lo[i] - 1e-6 <= fix_off[j] <= hi[i] + 1e-6:
+                out[j] = base[i] + min(max(fix_off[j] - lo[i], 0.0), hi[i] - lo[i])
+                at = i
+                break
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _moved_ends(edge, lo, hi, along, odometer, reach, edge_len):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """
+    How far the path's start moves forward and its end moves on (metres, either may be < 0).
+
+    ``along`` and ``odometer`` are the segment's model fixes' (the first and last fix of
+    the segment first and last); ``reach`` is ``(sigma, sigmas)``.
+    """
+    sigma, sigmas = reach
+    a, b, scale = odometer_fit(along, odometer, sigma)
+    n = len(along)
+    if not np.isfinite(a) or not np.isfinite(odometer[n - 1]):
+        return 0.0, 0.0
+    k = len(edge) - 1
+    limit = sigmas * scale
+    shift = 0.0
+    if lo[0] > 0.0:  # not at a junction: an end that could not move out does not move in
+        shift = min(max(a - along[0], -limit, -lo[0]), limit)
+        shift = min(shift, max(hi[0] - lo[0] - MIN_STRETCH_M, 0.0))
+    grow = 0.0
+    last = lo[k] + shift if k == 0 else lo[k]
+    if hi[k] < edge_len[edge[k]]:
+        target = a + b * (odometer[n - 1] - odometer[0]) - along[n - 1]
+        grow = min(max(target, -limit, MIN_STRETCH_M - (hi[k] - last)), limit)
+        grow = min(grow, edge_len[edge[k]] - hi[k])
+    return shift, grow
+
+
+def odometer_ends(
+    net: RoadNetwork,
+    segments: list[Segment],
+    points: MatchedPoints,
+    odometer_m: FloatArray | None,
+    config: MatchConfig,
+) -> tuple[list[Segment], MatchedPoints]:
+    """
+    The segments with their ends where the odometer puts them, and the points with them.
+
+    For each segment, a line through its model fixes' places along its path against their
+    odometer readings (:func:`odometer_fit`) gives where its first and last fix were; the
+    path's start and end move there, at most ``config.odometer_end_sigmas`` residual scales
+    (at least ``config.sigma_m``) and only along their own edge, never from or past a
+    junction. Fixes left before the new start or past the new end move onto it. Without an
+    odometer, or with ``odometer_end_sigmas`` 0, the segments and points come back as given.
+    """
+    if odometer_m is None or config.odometer_end_sigmas <= 0 or not segments:
+        return segments, points
+    edge_len = net.kernel_geometry[0]
+    model = points.matched & ~points.interpolated
+    offset = points.offset_m.copy()
+    moved = np.zeros(len(offset), dtype=bool)
+    out = []
+    for seg in segments:
+        lo, hi = seg.start_offset_m.copy(), seg.end_offset_m.copy()
+        span = np.arange(seg.first, seg.last + 1)
+        fixes = span[model[span] & (points.segment[span] == seg.index)]
+        if len(fixes) < MIN_READINGS or fixes[0] != seg.first or fixes[-1] != seg.last:
+            out.append(seg)
+            continue
+        along = _along(seg.edge, lo, hi, points.edge[fixes], offset[fixes])
+        reach = (float(config.sigma_m), float(config.odometer_end_sigmas))
+        shift, grow = _moved_ends(
+            seg.edge, lo, hi, along, np.ascontiguousarray(odometer_m[fixes]), reach, edge_len
+        )
+        if shift == 0.0 and grow == 0.0:
+            out.append(seg)
+            continue
+        lo[0] += shift
+        hi[-1] += grow
+        every = span[points.matched[span] & (points.segment[span] == seg.index)]
+        places = _along(seg.edge, seg.start_offset_m, seg.end_offset_m, points.edge[every],
+                        offset[every])  # fmt: skip
+        first_place, last_place = (places == places[0]), (places == places[-1])
+        head = every[first_place | (places < shift)]
+        head = head[points.edge[head] == seg.edge[0]]
+        tail = every[last_place | (places > seg.length_m + grow)]
+        tail = tail[points.edge[tail] == seg.edge[-1]]
+        offset[head], offset[tail] = lo[0], hi[-1]
+        moved[head] = moved[tail] = True
+        out.append(Segment(seg.index, seg.first, seg.last, seg.edge, lo, hi, net=net))
+    if not moved.any():
+        return out, points
+    at = np.flatnonzero(moved)
+    x, y = net.point_on_edge(points.edge[at], offset[at])
+    lon, lat = points.lon.copy(), points.lat.copy()
+    lon[at], lat[at] = net.unproject(x, y)
+    fx, fy = net.project(points.raw_lon[at], points.raw_lat[at])
+    distance = points.distance_m.copy()
+    distance[at] = np.hypot(x - fx, y - fy)
+    return out, dataclasses.replace(points, offset_m=offset, lon=lon, lat=lat, distance_m=distance)
