@@ -10,9 +10,9 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 
 if TYPE_CHECKING:
-    from mapmatch.types import FloatArray
+    from mapmatch.types import BoolArray, FloatArray
 
-__all__ = ["DistanceCheck", "check_distance", "chord_length_m"]
+__all__ = ["END_OUTLIERS", "DistanceCheck", "check_distance", "chord_length_m", "measured_span"]
 
 Verdict = Literal["pass", "over", "under", "incomplete"]
 Source = Literal["odometer", "caller", "chord"]
@@ -42,7 +42,9 @@ class DistanceCheck:
         The pass band ``(low, high)`` of relative errors.
     verdict
         ``pass`` inside the band, ``over``/``under`` outside it, ``incomplete`` when breaks
-        or unmatched fixes leave part of the road distance unknown.
+        or unmatched fixes leave part of the road distance unknown (an outlier left
+        unmatched at an end does not: both distances then run between the first and last
+        matched fix, :func:`measured_span`).
     evidence
         What the matched length rests on, the strongest of: ``positions`` only (the
         weakest: a route between fixes, chosen by distance), ``heading`` (the reported
@@ -73,6 +75,42 @@ class DistanceCheck:
 
 
 _CHECK_FIELDS = tuple(f.name for f in fields(DistanceCheck))
+
+
+#: At most this many unmatched outliers at either end of a trace leave its length complete.
+END_OUTLIERS = 2
+
+
+def measured_span(matched: BoolArray, outlier: BoolArray, segments: int) -> tuple[slice, bool]:
+    """
+    The fixes the distance check compares, and whether the matched length covers them all.
+
+    With one segment and every fix before the first matched one and after the last one an
+    outlier (at most :data:`END_OUTLIERS` at each end: a displaced fix, not a stretch away
+    from the roads), the check compares the span from the first to the last matched fix,
+    fused distance included, and the length is complete. Otherwise the whole trace, and the
+    length is complete only if one segment runs from the first fix to the last.
+
+    Examples
+    --------
+    >>> matched = np.array([False, True, True, True])
+    >>> measured_span(matched, np.array([True, False, False, False]), 1)
+    (slice(1, 4, None), True)
+    >>> measured_span(matched, np.zeros(4, dtype=bool), 1)
+    (slice(None, None, None), False)
+    """
+    whole = slice(None)
+    at = np.flatnonzero(matched)
+    if segments != 1 or not len(at):
+        return whole, False
+    first, last = int(at[0]), int(at[-1])
+    if first == 0 and last == len(matched) - 1:
+        return whole, True
+    head, tail = outlier[:first], outlier[last + 1 :]
+    ends_stray = len(head) <= END_OUTLIERS and len(tail) <= END_OUTLIERS
+    if ends_stray and bool(head.all()) and bool(tail.all()):
+        return slice(first, last + 1), True
+    return whole, False
 
 
 def chord_length_m(x: FloatArray, y: FloatArray) -> float:

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from mapmatch.config import MatchConfig
-from mapmatch.distance import Evidence, check_distance, chord_length_m
+from mapmatch.distance import Evidence, check_distance, chord_length_m, measured_span
 from mapmatch.errors import DeadlineExceededError, NoCandidatesError
 from mapmatch.hmm.assemble import assemble
 from mapmatch.hmm.ends import odometer_ends
@@ -163,15 +163,18 @@ def match(
         net, assembled.segments, assembled.points, trace.odometer_m, config
     )
     matched_length = float(sum(s.length_m for s in segments))
-    complete = len(segments) == 1 and bool(points.matched[0] and points.matched[-1])
+    span, complete = measured_span(points.matched, points.outlier, len(segments))
+    odometer = trace.odometer_m[span] if trace.odometer_m is not None else None
+    if odometer is None and span != slice(None):
+        complete = False  # the caller's distance is the whole trip's
     check = check_distance(
         trace_id=trace.trace_id,
         matched_length_m=matched_length,
         complete=complete,
         band=config.distance_band,
-        odometer_m=trace.odometer_m,
+        odometer_m=odometer,
         fused_distance_m=fused_distance_m,
-        chord_m=chord_length_m(x, y),
+        chord_m=chord_length_m(x[span], y[span]),
         evidence=_evidence(trace, fixes, config),
         uturns=_uturns(net, segments),
     )

@@ -90,7 +90,7 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 
 from mapmatch.config import MatchConfig
-from mapmatch.distance import DistanceCheck, check_distance, chord_length_m
+from mapmatch.distance import DistanceCheck, check_distance, chord_length_m, measured_span
 from mapmatch.errors import ConfigError, InputTypeError, InvalidTraceError, NoCandidatesError
 from mapmatch.hmm.emission import emissions
 from mapmatch.hmm.ends import odometer_ends
@@ -1003,22 +1003,19 @@ class OnlineMatcher:
             radius = float(model.fixes.radius_m.max()) if model else self.config.search_radius_m
             self._failure = NoCandidatesError(self.trip_id, radius)
             raise self._failure
-        odometer = None
-        if not math.isnan(self._odometer[0]):
-            odometer = np.array(self._odometer)
+        readings = self._record.odometer_m()
         segments, points = odometer_ends(
-            self.net,
-            self._record.segments(self.net),
-            self._record.points(),
-            self._record.odometer_m(),
-            self.config,
+            self.net, self._record.segments(self.net), self._record.points(), readings, self.config
         )
         matched_length = float(sum(s.length_m for s in segments))
-        complete = len(segments) == 1 and bool(points.matched[[0, -1]].all())
+        span, complete = measured_span(points.matched, points.outlier, len(segments))
+        odometer = readings[span] if readings is not None else None
+        if odometer is None and span != slice(None):
+            complete = False  # the caller's distance is the whole trip's
         store = self._tail.store
         chord = self._settled_chord_m
         if store.base == 0 and model is not None:  # the whole trip is at hand: as match sums it
-            chord = chord_length_m(store.column("x"), store.column("y"))
+            chord = chord_length_m(store.column("x")[span], store.column("y")[span])
         check = check_distance(
             trace_id=self.trip_id,
             matched_length_m=matched_length,

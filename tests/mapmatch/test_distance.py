@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from mapmatch.distance import check_distance, chord_length_m
+from mapmatch.distance import END_OUTLIERS, check_distance, chord_length_m, measured_span
 
 BAND = (-0.04, 0.01)
 
@@ -83,3 +83,15 @@ def test_the_check_as_a_dict_has_every_member() -> None:
         **{f.name: getattr(c, f.name) for f in dataclasses.fields(c)},  # type: ignore[arg-type]
         "band": list(BAND),
     }
+
+
+def test_an_outlier_at_an_end_leaves_the_span_complete_a_stretch_off_road_does_not() -> None:
+    matched = np.array([False, True, True, True, False])
+    outlier = np.array([True, False, False, False, True])
+    assert measured_span(matched, outlier, 1) == (slice(1, 4), True)
+    off_road = np.array([False, False, False, False, True])
+    assert measured_span(matched, off_road, 1) == (slice(None), False)
+    assert measured_span(matched, outlier, 2) == (slice(None), False)  # a break
+    many = np.array([False] * (END_OUTLIERS + 1) + [True, True])
+    assert measured_span(many, ~many, 1) == (slice(None), False)  # more than a stray fix
+    assert measured_span(np.ones(3, dtype=bool), np.zeros(3, dtype=bool), 1) == (slice(None), True)

@@ -276,3 +276,21 @@ def test_the_odometer_fit_leaves_out_what_does_not_follow_it() -> None:
     assert np.isnan(odometer_fit(along[:2], odometer[:2], sigma)[0])  # too few readings
     odometer[0] = np.nan
     assert np.isnan(odometer_fit(along, odometer, sigma)[0])  # the first reading unknown
+
+
+def test_an_outlier_at_the_last_fix_leaves_the_verdict_standing(tmp_path: Path) -> None:
+    net = _road(tmp_path)
+    x, _, _, t = drive([(50.0, 0.0), (1450.0, 0.0)], speed_mps=10.0, interval_s=1.0)
+    y = np.random.default_rng(6).normal(0.0, 2.0, len(x))
+    odometer = 1.02 * (x - x[0])  # 2 % high
+    x[-1], y[-1] = x[-1] + 25.0, y[-1] + 46.0  # the last fix thrown off (a road within 50 m)
+    lon, lat = lonlat(x, y)
+    trace = mapmatch.Trace(time=1.7e9 + t, lon=lon, lat=lat, odometer=odometer, trace_id="end")
+    result = mapmatch.match(trace, net)
+    assert not result.points.matched[-1]
+    assert result.points.outlier[-1]
+    check = result.distance_check
+    assert check.verdict == "over"
+    # both distances end at the last matched fix
+    assert check.fused_length_m == pytest.approx(odometer[-2])
+    assert check.relative_error == pytest.approx(0.02, abs=0.003)
