@@ -183,13 +183,16 @@ def odometer_ends(
         every = span[points.matched[span] & (points.segment[span] == seg.index)]
         places = _along(seg.edge, seg.start_offset_m, seg.end_offset_m, points.edge[every],
                         offset[every])  # fmt: skip
-        first_place, last_place = (places == places[0]), (places == places[-1])
-        head = every[first_place | (places < shift)]
-        head = head[points.edge[head] == seg.edge[0]]
-        tail = every[last_place | (places > seg.length_m + grow)]
-        tail = tail[points.edge[tail] == seg.edge[-1]]
-        offset[head], offset[tail] = lo[0], hi[-1]
-        moved[head] = moved[tail] = True
+        if shift:  # the fixes at the old start, and any the new start passed
+            head = every[(places == places[0]) | (places < shift)]
+            head = head[points.edge[head] == seg.edge[0]]
+            offset[head] = lo[0]
+            moved[head] = True
+        if grow:  # the fixes at the old end, and any the new end fell short of
+            tail = every[(places == places[-1]) | (places > seg.length_m + grow)]
+            tail = tail[points.edge[tail] == seg.edge[-1]]
+            offset[tail] = hi[-1]
+            moved[tail] = True
         out.append(Segment(seg.index, seg.first, seg.last, seg.edge, lo, hi, net=net))
     if not moved.any():
         return out, points
