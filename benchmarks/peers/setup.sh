@@ -98,8 +98,10 @@ elif [[ -f "$ROOT/.bench/fmm/src/build/ubodt_gen" && -f "$ROOT/.bench/fmm/src/bu
 else
   log "building FMM into .bench/fmm (10-20 minutes on 2 cores the first time; log .bench/fmm-build.log)"
   mkdir -p "$ROOT/.bench"
-  # an absolute interpreter path: build.sh resolves it from inside its build folder
-  if bash "$FMM_SRC/build.sh" "$ROOT/.bench/fmm" "$PROJECT_PY" > "$ROOT/.bench/fmm-build.log" 2>&1; then
+  # an absolute interpreter path: build.sh resolves it from inside its build folder; FMM's
+  # python/CMakeLists.txt also runs a bare `python` (for distutils): the project venv's first
+  if PATH="$(dirname "$PROJECT_PY"):$PATH" bash "$FMM_SRC/build.sh" "$ROOT/.bench/fmm" "$PROJECT_PY" \
+       > "$ROOT/.bench/fmm-build.log" 2>&1; then
     log "FMM ready: $(tail -1 "$ROOT/.bench/fmm-build.log")"
   else
     log "FMM build FAILED, see .bench/fmm-build.log"; tail -20 "$ROOT/.bench/fmm-build.log"
