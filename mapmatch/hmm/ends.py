@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     from mapmatch.types import FloatArray
     from roadnets import RoadNetwork
 
-__all__ = ["odometer_ends", "odometer_fit"]
+__all__ = ["moved_ends", "odometer_ends", "odometer_fit"]
 
 #: Fewer readings than this on a segment leave its ends where they are.
 MIN_READINGS = 3
@@ -112,7 +112,7 @@ def _along(edge, lo, hi, fix_edge, fix_off):  # type: ignore[no-untyped-def]  # 
 
 
 @njit(cache=True, nogil=True)
-def _moved_ends(edge, lo, hi, along, odometer, reach, edge_len):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+def moved_ends(edge, lo, hi, along, odometer, reach, edge_len):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     """
     How far the path's start moves forward and its end moves on (metres, either may be < 0).
 
@@ -122,8 +122,9 @@ def _moved_ends(edge, lo, hi, along, odometer, reach, edge_len):  # type: ignore
     sigma, sigmas = reach
     a, b, scale = odometer_fit(along, odometer, sigma)
     n = len(along)
-    if not np.isfinite(a) or not np.isfinite(odometer[n - 1]):
-        return 0.0, 0.0
+    ends_known = np.isfinite(along[0]) and np.isfinite(along[n - 1])
+    if not (np.isfinite(a) and ends_known and np.isfinite(odometer[n - 1])):
+        return 0.0, 0.0  # an end fix off its path (placed where no stretch holds it)
     k = len(edge) - 1
     limit = sigmas * scale
     shift = 0.0
@@ -172,7 +173,7 @@ def odometer_ends(
             continue
         along = _along(seg.edge, lo, hi, points.edge[fixes], offset[fixes])
         reach = (float(config.sigma_m), float(config.odometer_end_sigmas))
-        shift, grow = _moved_ends(
+        shift, grow = moved_ends(
             seg.edge, lo, hi, along, np.ascontiguousarray(odometer_m[fixes]), reach, edge_len
         )
         if shift == 0.0 and grow == 0.0:

@@ -16,7 +16,7 @@ import roadnets
 from mapmatch.evaluation.accuracy.conditions import condition_config
 from mapmatch.evaluation.scoring import score_geojson
 from mapmatch.evaluation.simulate import SimulationConfig, simulate_trips, strip_to_class
-from mapmatch.hmm.ends import odometer_fit
+from mapmatch.hmm.ends import moved_ends, odometer_fit
 from tests.mapmatch.toy import drive, load, lonlat, trace_of, write_osm
 
 if TYPE_CHECKING:
@@ -294,3 +294,17 @@ def test_an_outlier_at_the_last_fix_leaves_the_verdict_standing(tmp_path: Path) 
     # both distances end at the last matched fix
     assert check.fused_length_m == pytest.approx(odometer[-2])
     assert check.relative_error == pytest.approx(0.02, abs=0.003)
+
+
+def test_an_end_fix_off_its_path_leaves_the_ends_where_they_are() -> None:
+    # a last fix held behind the path's front lies on no stretch: its place is unknown (NaN)
+    edge, lo, hi = np.array([0, 1]), np.array([5.0, 0.0]), np.array([100.0, 50.0])
+    odometer = np.arange(6) * 30.0
+    along = odometer + 3.0
+    along[-1] = np.nan
+    edge_len = np.array([100.0, 80.0])
+    assert moved_ends(edge, lo, hi, along, odometer, (5.0, 2.0), edge_len) == (0.0, 0.0)
+    along[0], along[-1] = 0.0, 149.0  # known, both behind the line the others lie on
+    shift, grow = moved_ends(edge, lo, hi, along, odometer, (5.0, 2.0), edge_len)
+    assert 0.0 < shift < 3.0  # the start moves on towards the line, the end too
+    assert 0.0 < grow < 4.0
