@@ -81,36 +81,41 @@ _CHECK_FIELDS = tuple(f.name for f in fields(DistanceCheck))
 END_OUTLIERS = 2
 
 
-def measured_span(matched: BoolArray, outlier: BoolArray, segments: int) -> tuple[slice, bool]:
+def measured_span(
+    matched: BoolArray, outlier: BoolArray, segments: int, odometer_m: FloatArray | None
+) -> tuple[slice, bool, FloatArray | None]:
     """
-    The fixes the distance check compares, and whether the matched length covers them all.
+    The fixes the distance check compares, whether the length covers them, their odometer.
 
     With one segment and every fix before the first matched one and after the last one an
     outlier (at most :data:`END_OUTLIERS` at each end: a displaced fix, not a stretch away
     from the roads), the check compares the span from the first to the last matched fix,
-    fused distance included, and the length is complete. Otherwise the whole trace, and the
-    length is complete only if one segment runs from the first fix to the last.
+    odometer included, and the length is complete (unless there is no odometer: a caller's
+    distance is the whole trip's). Otherwise the whole trace, and the length is complete only
+    if one segment runs from the first fix to the last.
 
     Examples
     --------
     >>> matched = np.array([False, True, True, True])
-    >>> measured_span(matched, np.array([True, False, False, False]), 1)
-    (slice(1, 4, None), True)
-    >>> measured_span(matched, np.zeros(4, dtype=bool), 1)
-    (slice(None, None, None), False)
+    >>> odometer = np.array([0.0, 10.0, 20.0, 30.0])
+    >>> measured_span(matched, np.array([True, False, False, False]), 1, odometer)
+    (slice(1, 4, None), True, array([10., 20., 30.]))
+    >>> measured_span(matched, np.zeros(4, dtype=bool), 1, None)
+    (slice(None, None, None), False, None)
     """
     whole = slice(None)
     at = np.flatnonzero(matched)
     if segments != 1 or not len(at):
-        return whole, False
+        return whole, False, odometer_m
     first, last = int(at[0]), int(at[-1])
     if first == 0 and last == len(matched) - 1:
-        return whole, True
+        return whole, True, odometer_m
     head, tail = outlier[:first], outlier[last + 1 :]
     ends_stray = len(head) <= END_OUTLIERS and len(tail) <= END_OUTLIERS
-    if ends_stray and bool(head.all()) and bool(tail.all()):
-        return slice(first, last + 1), True
-    return whole, False
+    if ends_stray and bool(head.all()) and bool(tail.all()) and odometer_m is not None:
+        span = slice(first, last + 1)
+        return span, True, odometer_m[span]
+    return whole, False, odometer_m
 
 
 def chord_length_m(x: FloatArray, y: FloatArray) -> float:

@@ -163,10 +163,9 @@ def match(
         net, assembled.segments, assembled.points, trace.odometer_m, config
     )
     matched_length = float(sum(s.length_m for s in segments))
-    span, complete = measured_span(points.matched, points.outlier, len(segments))
-    odometer = trace.odometer_m[span] if trace.odometer_m is not None else None
-    if odometer is None and span != slice(None):
-        complete = False  # the caller's distance is the whole trip's
+    span, complete, odometer = measured_span(
+        points.matched, points.outlier, len(segments), trace.odometer_m
+    )
     check = check_distance(
         trace_id=trace.trace_id,
         matched_length_m=matched_length,

@@ -1008,10 +1008,9 @@ class OnlineMatcher:
             self.net, self._record.segments(self.net), self._record.points(), readings, self.config
         )
         matched_length = float(sum(s.length_m for s in segments))
-        span, complete = measured_span(points.matched, points.outlier, len(segments))
-        odometer = readings[span] if readings is not None else None
-        if odometer is None and span != slice(None):
-            complete = False  # the caller's distance is the whole trip's
+        span, complete, odometer = measured_span(
+            points.matched, points.outlier, len(segments), readings
+        )
         store = self._tail.store
         chord = self._settled_chord_m
         if store.base == 0 and model is not None:  # the whole trip is at hand: as match sums it

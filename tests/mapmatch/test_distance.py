@@ -88,10 +88,14 @@ def test_the_check_as_a_dict_has_every_member() -> None:
 def test_an_outlier_at_an_end_leaves_the_span_complete_a_stretch_off_road_does_not() -> None:
     matched = np.array([False, True, True, True, False])
     outlier = np.array([True, False, False, False, True])
-    assert measured_span(matched, outlier, 1) == (slice(1, 4), True)
+    odometer = np.arange(5) * 10.0
+    span, complete, readings = measured_span(matched, outlier, 1, odometer)
+    assert (span, complete, readings.tolist()) == (slice(1, 4), True, [10.0, 20.0, 30.0])
+    assert measured_span(matched, outlier, 1, None)[:2] == (slice(None), False)  # caller's
     off_road = np.array([False, False, False, False, True])
-    assert measured_span(matched, off_road, 1) == (slice(None), False)
-    assert measured_span(matched, outlier, 2) == (slice(None), False)  # a break
+    assert measured_span(matched, off_road, 1, odometer)[:2] == (slice(None), False)
+    assert measured_span(matched, outlier, 2, odometer)[:2] == (slice(None), False)  # a break
     many = np.array([False] * (END_OUTLIERS + 1) + [True, True])
-    assert measured_span(many, ~many, 1) == (slice(None), False)  # more than a stray fix
-    assert measured_span(np.ones(3, dtype=bool), np.zeros(3, dtype=bool), 1) == (slice(None), True)
+    assert measured_span(many, ~many, 1, np.arange(5.0))[:2] == (slice(None), False)
+    whole = measured_span(np.ones(3, dtype=bool), np.zeros(3, dtype=bool), 1, None)
+    assert whole == (slice(None), True, None)
