@@ -308,3 +308,25 @@ def test_an_end_fix_off_its_path_leaves_the_ends_where_they_are() -> None:
     shift, grow = moved_ends(edge, lo, hi, along, odometer, (5.0, 2.0), edge_len)
     assert 0.0 < shift < 3.0  # the start moves on towards the line, the end too
     assert 0.0 < grow < 4.0
+
+
+def _from_the_side_street(first_fix: tuple[float, float] | None) -> mapmatch.Trace:
+    """1 Hz, positions only: 570 m east at 6 m/s from 1030 m, past the side street at 1000 m."""
+    x, _, _, t = drive([(1030.0, 0.0), (1600.0, 0.0)], speed_mps=6.0, interval_s=1.0)
+    y = np.random.default_rng(8).normal(0.0, 3.0, len(x))
+    if first_fix is not None:
+        x[0], y[0] = first_fix
+    return trace_of(x, y, time_s=t)
+
+
+def test_a_first_fix_thrown_onto_a_side_street_is_an_outlier(tmp_path: Path) -> None:
+    net = _road(tmp_path)
+    kept = mapmatch.match(_from_the_side_street(None), net)
+    assert not kept.points.outlier.any()  # a first fix where the drive begins stays
+    # the first fix 39 m off, on the side street, 6.5 times what 1 s at 6 m/s explains: with
+    # positions only nothing but the other fixes' own pace says it is no drive down that street
+    thrown = mapmatch.match(_from_the_side_street((1000.0, 25.0)), net)
+    assert thrown.points.outlier[0]
+    assert thrown.way_ids() == [1]
+    # the path begins at the second fix, 6 m on (and a few metres of its noise)
+    assert kept.matched_length_m - 15.0 < thrown.matched_length_m < kept.matched_length_m - 2.0
