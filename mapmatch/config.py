@@ -269,6 +269,18 @@ class MatchConfig:
         le=1000,
         overridable=True,
     )
+    uturn_speed_mps: float = _param(
+        5.0,
+        doc="fastest a car turns round: a loop after Viterbi that turns round and could not "
+        "be driven in the time its fixes give it, at travel_accel_mps2 down to and up from "
+        "this speed, is taken out (a 14 m spur out and back between two fixes 1 s apart at "
+        "8 m/s); generous on purpose, a turning circle at a dead end's end included: on the "
+        "accuracy matrix it takes out two spurious U-turns (1 s, positions only) and changes "
+        "nothing else, the noise-free truth included",
+        unit="m/s",
+        gt=0,
+        le=100,
+    )
     uturn_evidence_penalty: float = _param(
         3.0,
         doc="cost of a U-turn whose fixes' headings point apart at speed",

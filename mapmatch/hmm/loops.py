@@ -13,8 +13,12 @@ scored once as driven (their chosen candidates and moves) and once as a car that
 place where the loop starts (every fix's emission there, no moves), each with the moves into
 and out of the loop. A loop stays only when it explains the fixes better by at least
 ``loop_penalty`` nats; a car going round a block or into a dead end has fixes all along the
-loop, far from its start, and keeps it easily. A loop that a turn restriction forces (the
-only legal way round a banned turn) is never taken out.
+loop, far from its start, and keeps it easily. A loop that turns round and could not be
+driven in the time between its fixes, the car slowing to ``uturn_speed_mps`` to turn and
+neither braking nor accelerating faster than ``travel_accel_mps2``, is taken out whatever its
+price: a burst of fixes to one side at 1 s no longer buys a 20 m spur out and back in a second.
+A loop that a turn restriction forces (the only legal way round a banned turn) is never taken
+out.
 
 Compiled (:func:`collapse_kernel`): the path walk of :mod:`mapmatch.hmm.pathwalk` runs it on
 every piece that passes a place twice.
@@ -30,7 +34,7 @@ from numba import njit
 from mapmatch.hmm.emission import distance_score
 from mapmatch.hmm.geometry import network_geometry, point_on_edge
 from mapmatch.hmm.observations import between_kernel, sigma_of_distances
-from mapmatch.hmm.params import P_UTURN_PENALTY
+from mapmatch.hmm.params import P_ACCEL, P_UTURN_PENALTY, P_UTURN_SPEED
 from mapmatch.hmm.transition import transition_score
 
 if TYPE_CHECKING:
@@ -207,6 +211,23 @@ def _free_uturns(e, lo, hi, s0, s1, edge_len, edge_v, edge_twin, out_ptr):  # ty
 
 
 @njit(cache=True, nogil=True)
+def _first_turn(e, lo, hi, s0, s1, edge_twin):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Where along the path it first turns round between ``s0`` and ``s1`` (NaN: nowhere)."""
+    base = 0.0
+    for k in range(len(e) - 1):
+        base += hi[k] - lo[k]
+        if s0 - _EPS_M <= base <= s1 + _EPS_M and edge_twin[e[k]] == e[k + 1]:
+            return base
+    return np.nan
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _time_to_cover(distance, speed, accel):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Least time to drive ``distance`` from ``speed`` at ``accel`` (or to brake into it)."""
+    return (np.sqrt(speed * speed + 2.0 * accel * distance) - speed) / accel
+
+
+@njit(cache=True, nogil=True)
 def _cut(e, lo, hi, s0, s1):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     """The path without its stretch between ``s0`` and ``s1`` along it (cut mid-stretch too)."""
     n = len(e)
@@ -286,6 +307,19 @@ def _gain(along, e, lo, hi, place_x, place_y, s0, s1, model, travel, net):  # ty
         return np.inf  # the loop is not between observations of the piece: keep it
     k = used[start + before : start + after + 1]
     steps = len(k) - 1
+    # a car turning round slows to uturn_speed_mps there: a loop that turns round faster
+    # than that allows, each side's length less a sigma of the fixes' own error, was never
+    # driven (a 14 m spur out and back between two fixes 1 s apart at 8 m/s)
+    turn_at = _first_turn(e, lo, hi, s0, s1, edge_twin)
+    if np.isfinite(turn_at) and params[P_ACCEL] > 0:
+        sigma_ends = max(osigma[k[0]], osigma[k[steps]])
+        least = _time_to_cover(
+            max(turn_at - along[before] - sigma_ends, 0.0), params[P_UTURN_SPEED], params[P_ACCEL]
+        ) + _time_to_cover(
+            max(along[after] - turn_at - sigma_ends, 0.0), params[P_UTURN_SPEED], params[P_ACCEL]
+        )
+        if otime[k[steps]] - otime[k[0]] < least:
+            return -np.inf
     odometer, speed_m, slack_m, unknown_lo, unknown_hi = travel
     if len(odometer) or len(speed_m):
         travel_m, slack = between_kernel(k, odometer, speed_m, slack_m, unknown_lo, unknown_hi)

@@ -43,6 +43,8 @@ PARAMS = (
     "route_factor",
     "route_slack_m",
     "route_reach_mps",
+    "travel_accel_mps2",
+    "uturn_speed_mps",
 )
 (
     P_MAX_EMISSION_PENALTY,
@@ -69,6 +71,8 @@ PARAMS = (
     P_ROUTE_FACTOR,
     P_ROUTE_SLACK,
     P_ROUTE_REACH,
+    P_ACCEL,
+    P_UTURN_SPEED,
 ) = range(len(PARAMS))
 
 _CACHE: dict[int, tuple[MatchConfig, FloatArray]] = {}

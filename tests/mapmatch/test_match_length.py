@@ -330,3 +330,21 @@ def test_a_first_fix_thrown_onto_a_side_street_is_an_outlier(tmp_path: Path) -> 
     assert thrown.way_ids() == [1]
     # the path begins at the second fix, 6 m on (and a few metres of its noise)
     assert kept.matched_length_m - 15.0 < thrown.matched_length_m < kept.matched_length_m - 2.0
+
+
+def test_a_turn_round_faster_than_a_car_can_turn_is_taken_out(
+    data_dir: Path, cache_dir: Path
+) -> None:
+    # the accuracy matrix's realistic-1s trip 8 on this extract, positions only: a burst of
+    # fixes pulls the path 21 m along a side road and back between fixes too close in time
+    # for a car that has to slow to turn round
+    net = roadnets.load(data_dir / "melbourne-suburb_au.osm.pbf", cache_dir=cache_dir)
+    trip = simulate_trips(net, condition_config("realistic-1s"), count=1, seed=1008)[0]
+    trace = strip_to_class(trip.trace, "positions")
+    scores = {}
+    for turn_speed in (5.0, 100.0):  # the default, and a car that turns round at any speed
+        result = mapmatch.match(trace, net, mapmatch.MatchConfig(uturn_speed_mps=turn_speed))
+        scores[turn_speed] = score_geojson(result.to_geojson(), trip.truth_record())
+    assert scores[100.0].spurious_uturns == 1  # the rule is what takes it out
+    assert scores[5.0].spurious_uturns == 0
+    assert abs(scores[5.0].length_error) < 0.01 < abs(scores[100.0].length_error)
