@@ -104,9 +104,9 @@ def _end_miss(kept, x, y, sigma, mid, gap, fixes, end, params):  # type: ignore[
     spread = 2.0 * np.sqrt(2.0) * max(sigma[o], sigma[j])  # twice the chord's own noise
     vx, vy = x[j] - fix_x[near], y[j] - fix_y[near]
     chord = np.hypot(vx, vy)
-    # what the velocity may have changed by since: the chord's mean is half its span away
-    turn = 0.5 * accel * lead * (span + lead)
-    reach = (chord + spread) / span * lead + turn  # how far behind it may lie
+    # how far the velocity's change can carry it off: the chord's mean is half its span away
+    drift = 0.5 * accel * lead * (span + lead)
+    reach = (chord + spread) / span * lead + drift  # how far behind it may lie
     allowed = sigmas * sigma[e]
     if reach > allowed:  # it may have turned a corner and come from farther aside than that
         return np.nan
