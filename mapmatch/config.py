@@ -276,7 +276,7 @@ class MatchConfig:
         "this speed, is taken out (a 14 m spur out and back between two fixes 1 s apart at "
         "8 m/s); generous on purpose, a turning circle at a dead end's end included: on the "
         "accuracy matrix it takes out two spurious U-turns (1 s, positions only) and changes "
-        "nothing else, the noise-free truth included",
+        "nothing else, the noise-free truth included; 3 takes out nothing more",
         unit="m/s",
         gt=0,
         le=100,
