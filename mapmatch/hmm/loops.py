@@ -195,30 +195,27 @@ def _visit(nodes, at, m, node, here):  # type: ignore[no-untyped-def]  # pragma:
 
 
 @njit(cache=True, nogil=True)
-def _free_uturns(e, lo, hi, s0, s1, edge_len, edge_v, edge_twin, out_ptr):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """U-turns the path makes between ``s0`` and ``s1`` along it, but at dead ends."""
+def _turns(e, lo, hi, s0, s1, edge_len, edge_v, edge_twin, out_ptr):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    The path's U-turns between ``s0`` and ``s1`` along it.
+
+    Returns how many there are, but at dead ends, and where along the path the first of them
+    all is (NaN: none).
+    """
     count = 0
+    first = np.nan
     base = 0.0
     for k in range(len(e) - 1):
         base += hi[k] - lo[k]
         if not (s0 - _EPS_M <= base <= s1 + _EPS_M) or edge_twin[e[k]] != e[k + 1]:
             continue
+        if np.isnan(first):
+            first = base
         node = edge_v[e[k]]
         at_node = hi[k] >= edge_len[e[k]] - _EPS_M
         if not (at_node and out_ptr[node + 1] - out_ptr[node] <= 1):
             count += 1
-    return count
-
-
-@njit(cache=True, nogil=True)
-def _first_turn(e, lo, hi, s0, s1, edge_twin):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """Where along the path it first turns round between ``s0`` and ``s1`` (NaN: nowhere)."""
-    base = 0.0
-    for k in range(len(e) - 1):
-        base += hi[k] - lo[k]
-        if s0 - _EPS_M <= base <= s1 + _EPS_M and edge_twin[e[k]] == e[k + 1]:
-            return base
-    return np.nan
+    return count, first
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -310,7 +307,7 @@ def _gain(along, e, lo, hi, place_x, place_y, s0, s1, model, travel, net):  # ty
     # a car turning round slows to uturn_speed_mps there: a loop that turns round faster
     # than that allows, each side's length less a sigma of the fixes' own error, was never
     # driven (a 14 m spur out and back between two fixes 1 s apart at 8 m/s)
-    turn_at = _first_turn(e, lo, hi, s0, s1, edge_twin)
+    uturns, turn_at = _turns(e, lo, hi, s0, s1, edge_len, edge_v, edge_twin, out_ptr)
     if np.isfinite(turn_at) and params[P_ACCEL] > 0:
         sigma_ends = max(osigma[k[0]], osigma[k[steps]])
         least = _time_to_cover(
@@ -366,7 +363,6 @@ def _gain(along, e, lo, hi, place_x, place_y, s0, s1, model, travel, net):  # ty
             j += 1
     # the loop's U-turns cost what they cost in Viterbi, but one at a dead end's end is no
     # choice: the loop into a dead end is priced by loop_penalty alone
-    uturns = _free_uturns(e, lo, hi, s0, s1, edge_len, edge_v, edge_twin, out_ptr)
     driven_ll = (
         pairwise_sum(as_driven, 0, steps) + pairwise_sum(em_driven, 0, inside)
     ) - penalty * uturns

@@ -205,9 +205,6 @@ def _displaced(ptr, distance, fix_time, first, stop, x, y, sigma, travel, fix_xy
     for k in range(n):
         backed[k] = stop[k] - first[k] >= _BACKED_FIXES and nearest[k] <= 2.0 * sigma[k]
     odometer, speed_m, slack_m, lo, hi = travel
-    mid = np.empty(n)
-    for k in range(n):
-        mid[k] = 0.5 * (fix_time[first[k]] + fix_time[stop[k] - 1])
     for attempt in range(3):
         m = 0
         kept = np.empty(n_near, dtype=np.int64)
@@ -225,6 +222,7 @@ def _displaced(ptr, distance, fix_time, first, stop, x, y, sigma, travel, fix_xy
             travel_m, slack = np.empty(0), np.empty(0)
         found = _outliers(x[kept], y[kept], sigma[kept], gap, travel_m, slack, backed[kept], params)
         if not len(travel_m) and attempt == 0:  # one end spike at most: the next is no spike
+            mid = 0.5 * (fix_time[first] + fix_time[stop - 1])  # each observation's time
             fixes = (fix_xy[0], fix_xy[1], fix_time, first, stop)
             spikes = _end_spikes(kept, x, y, sigma, mid, gap, fixes, params)
             for end, inner in ((0, 1), (m - 1, m - 2)):
