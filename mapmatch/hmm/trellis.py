@@ -17,7 +17,7 @@ from mapmatch.hmm.candidates import Candidates
 from mapmatch.hmm.emission import distance_score, heading_score, speed_weight
 from mapmatch.hmm.observations import between_kernel, travel_arrays
 from mapmatch.hmm.params import P_CANDIDATE_MARGIN, P_MIN_LOG_TRANSITION, model_params
-from mapmatch.hmm.routes import pairs_kernel, route_search_bounds, search_bound
+from mapmatch.hmm.routes import pairs_kernel, search_bound
 from mapmatch.hmm.solution import Solution
 from mapmatch.hmm.transition import route_inputs, routes_found, table_pays, transitions_kernel
 from mapmatch.hmm.viterbi import _posterior_kernel, _viterbi_kernel
@@ -69,7 +69,9 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     :func:`~mapmatch.hmm.transition.route_inputs`, ``cands`` the seven arrays of every
     observation's :class:`Candidates`, ``obs`` the observations' ``(x, y, time, sigma,
     speed, heading)`` (heading empty when unknown), ``travel`` their
-    :func:`~mapmatch.hmm.observations.travel_arrays`.
+    :func:`~mapmatch.hmm.observations.travel_arrays`. Last in what it returns: each step's
+    route search bound (:func:`~mapmatch.hmm.routes.search_bound`), which tells whether the
+    precomputed route table pays (:func:`~mapmatch.hmm.transition.table_pays`).
     """
     graph, ws, scratch, uturn_cost_m, table = routing
     c_ptr, c_edge, c_off, c_dist, c_x, c_y, c_bear = cands
@@ -115,10 +117,13 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
         u, v = used[i], used[i + 1]
         step_m[i] = np.hypot(ox[v] - ox[u], oy[v] - oy[u])
         dt[i] = otime[v] - otime[u]
+    step_bounds = np.empty(len(step_m))
+    for i in range(len(step_m)):
+        step_bounds[i] = search_bound(step_m[i], dt[i], params)
     step, a, b, a_rank, b_rank = pairs_kernel(ptr)
     bounds = np.empty(len(step))
     for k in range(len(step)):
-        bounds[k] = search_bound(step_m[step[k]], dt[step[k]], params)
+        bounds[k] = step_bounds[step[k]]
     odometer, speed_m, slack_m, unknown_lo, unknown_hi = travel
     if len(odometer) or len(speed_m):
         travel_m, slack = between_kernel(used, odometer, speed_m, slack_m, unknown_lo, unknown_hi)
@@ -159,7 +164,7 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
         (ptr, edge, off, dist, cx, cy, bear),
         states, piece_lo, piece_hi, post, kinds, em_pad, tr_pad,
         (fits, searched, rec, r_dist, r_time, r_turns),
-        edge[a], edge[b],
+        edge[a], edge[b], step_bounds,
     )  # fmt: skip
 
 
@@ -173,10 +178,6 @@ def solve(
 ) -> Solution:
     """Score the trellis over the ``used`` fixes and find the best sequence."""
     c = all_cands
-    if not net.route_table_requested and len(used) > 1:
-        x, y, t = fixes.x[used], fixes.y[used], fixes.time_s[used]
-        if table_pays(route_search_bounds(np.hypot(np.diff(x), np.diff(y)), np.diff(t), config)):
-            net.request_route_table()  # a sparse trace: the next ones may use the table
     out = solve_kernel(
         route_inputs(net),
         net.arrays.edge_speed_mps,
@@ -187,7 +188,10 @@ def solve(
         travel_arrays(fixes.travel),
         model_params(config),
     )
-    cand_arrays, states, piece_lo, piece_hi, post, kinds, em_pad, tr_pad, found, ea, eb = out
+    cand_arrays, states, piece_lo, piece_hi, post, kinds, em_pad, tr_pad, found, ea, eb = out[:11]
+    bounds = out[11]  # each step's route search bound
+    if not net.route_table_requested and table_pays(bounds):
+        net.request_route_table()  # a sparse trace: the next ones may use the table
     cands = Candidates(*cand_arrays)
     pieces = list(zip(piece_lo.tolist(), piece_hi.tolist(), strict=True))
     routes = routes_found(net, ea, eb, found)
