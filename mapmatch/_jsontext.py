@@ -408,29 +408,44 @@ class _Writer:
 
     def column(self, column: Column) -> None:
         """Write each row's value of ``column``."""
-        if isinstance(column, Floats):
-            if not 0 <= column.decimals < len(_POW10):
-                msg = f"decimals={column.decimals}: use 0 to {len(_POW10) - 1}"
-                raise ValueError(msg)
-            code = column.decimals * 4 + _ROUNDING[column.rounding]
-            self._step(_FLOAT, len(self.floats), self._mask(column.valid), code)
-            self.floats.append(column.values)
-        elif isinstance(column, Ints):
-            self._step(_INT, len(self.ints), self._mask(column.valid))
-            self.ints.append(column.values)
-        elif isinstance(column, Bools):
-            self._step(_BOOL, len(self.ints))
-            self.ints.append(column.values)
-        elif isinstance(column, Const):
-            value = column.value
-            self.lit(_QUOTES[value] if isinstance(value, str) else json.dumps(value))
-        elif isinstance(column, Tuple):
-            column.write(self)
-        elif isinstance(column, Nested) and column.table.rows == self.rows:
-            column.table.write(self)
-        else:
+        write = _WRITES.get(type(column))  # one lookup instead of a chain of isinstance
+        if write is None or not write(self, column):
             self._step(_TEXT, len(self.texts))
             self.texts.append(column.cells(self.rows))
+
+    def _floats(self, column: Floats) -> bool:
+        if not 0 <= column.decimals < len(_POW10):
+            msg = f"decimals={column.decimals}: use 0 to {len(_POW10) - 1}"
+            raise ValueError(msg)
+        code = column.decimals * 4 + _ROUNDING[column.rounding]
+        self._step(_FLOAT, len(self.floats), self._mask(column.valid), code)
+        self.floats.append(column.values)
+        return True
+
+    def _ints(self, column: Ints) -> bool:
+        self._step(_INT, len(self.ints), self._mask(column.valid))
+        self.ints.append(column.values)
+        return True
+
+    def _bools(self, column: Bools) -> bool:
+        self._step(_BOOL, len(self.ints))
+        self.ints.append(column.values)
+        return True
+
+    def _const(self, column: Const) -> bool:
+        value = column.value
+        self._pending.append(_QUOTES[value] if isinstance(value, str) else json.dumps(value))
+        return True
+
+    def _tuple(self, column: Tuple) -> bool:
+        column.write(self)
+        return True
+
+    def _nested(self, column: Nested) -> bool:
+        if column.table.rows != self.rows:
+            return False  # written from its cells
+        column.table.write(self)
+        return True
 
     def group(self, valid: BoolArray | None) -> int:
         """Open a part written as ``null`` outside ``valid``; close it with :meth:`close`."""
@@ -455,15 +470,9 @@ class _Writer:
         self._flush()
         ops, lit, lit_at = _program(tuple(self.ops))
         rows = self.rows
-        floats = np.empty((len(self.floats), rows), dtype=np.float64)
-        for i, f in enumerate(self.floats):
-            floats[i] = f
-        ints = np.empty((len(self.ints), rows), dtype=np.int64)
-        for i, v in enumerate(self.ints):
-            ints[i] = v
-        masks = np.empty((len(self.masks), rows), dtype=np.bool_)
-        for i, m in enumerate(self.masks):
-            masks[i] = m
+        floats = _stacked(self.floats, rows, np.float64)
+        ints = _stacked(self.ints, rows, np.int64)
+        masks = _stacked(self.masks, rows, np.bool_)
         text, text_at = self._text()
         out, row_at, slow = _write_rows(
             rows, sep, ops, lit, lit_at, floats, ints, masks, text, text_at, _POW10
@@ -502,6 +511,17 @@ class _Writer:
             base = ends[-1]
         data = bytearray("".join(joined).encode("ascii"))
         return np.frombuffer(data, dtype=np.uint8), text_at
+
+
+def _stacked(columns: list[Any], rows: int, dtype: type) -> Any:
+    """The columns' values as the rows of one 2-D array (``len(columns)`` x ``rows``)."""
+    if not columns:
+        return np.empty((0, rows), dtype=dtype)
+    stacked: Any = np.array(columns, dtype=dtype)
+    if stacked.shape != (len(columns), rows):
+        msg = f"columns of {stacked.shape[1:]} values for {rows} rows"
+        raise ValueError(msg)
+    return stacked
 
 
 _PROGRAMS: dict[tuple[tuple[int, Any, int, int], ...], tuple[IntArray, Any, IntArray]] = {}
@@ -824,3 +844,15 @@ class Table:
         names = [name for name, _ in self.columns]
         values = [column.objects(self.rows) for _, column in self.columns]
         return [dict(zip(names, row, strict=True)) for row in zip(*values, strict=True)]
+
+
+#: How :meth:`_Writer.column` writes each kind of column this module knows (in the program;
+#: any other column, or a writer returning False, is written from its cells).
+_WRITES: dict[type, Any] = {
+    Floats: _Writer._floats,
+    Ints: _Writer._ints,
+    Bools: _Writer._bools,
+    Const: _Writer._const,
+    Tuple: _Writer._tuple,
+    Nested: _Writer._nested,
+}
