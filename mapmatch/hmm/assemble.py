@@ -26,7 +26,7 @@ from mapmatch.hmm.geometry import (
     project_kernel,
     stretch_vertices,
 )
-from mapmatch.hmm.loops import chosen_distance_m, loop_network, scatter_sigma_m
+from mapmatch.hmm.loops import chosen_scatter_kernel, loop_network
 from mapmatch.hmm.observations import travel_arrays
 from mapmatch.hmm.params import model_params
 from mapmatch.hmm.pathwalk import walk_pieces
@@ -72,12 +72,21 @@ def _locate(edge, start_m, end_m, along):  # type: ignore[no-untyped-def]  # pra
 def _assemble_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     walk, place, loops
 ):
-    """:func:`walk_pieces`, then :func:`_place` on its paths: one call (argument tuples of each)."""
+    """
+    :func:`walk_pieces`, then :func:`_place` on its paths: one call (argument tuples of each).
+
+    ``place[3]`` is the padded posterior of the solution; :func:`_place` is given the chosen
+    candidate's.
+    """
     solution, obs, fixes, travel, net, routing, hold_limit = walk
     row_ptr, w_edge, w_lo, w_hi, along, jumps, removed = walk_pieces(
         solution, obs, fixes, travel, net, routing, hold_limit, loops
     )
-    pieces, obs_place, fix_place, post, thinning, geom, ids = place
+    pieces, obs_place, fix_place, post_pad, thinning, geom, ids = place
+    states = solution[3]
+    post = np.empty(len(states))
+    for i in range(len(states)):
+        post[i] = post_pad[i, max(states[i], 0)]
     placed = _place(
         (row_ptr, w_edge, w_lo, w_hi, along),
         pieces,
@@ -250,8 +259,9 @@ def assemble(
     a = net.arrays
     c, used, states = solution.cands, solution.used, solution.states
     geom = network_geometry(net)
-    chosen_m = chosen_distance_m(solution)
-    scatter = scatter_sigma_m(obs, solution, chosen_m)
+    chosen_m, scatter = chosen_scatter_kernel(
+        c.ptr, c.distance_m, states, used, obs.first, obs.stop
+    )
     f8 = np.float64
     x = np.ascontiguousarray(x, f8)
     y = np.ascontiguousarray(y, f8)
@@ -282,12 +292,11 @@ def assemble(
         scatter,
         chosen_m,
     )
-    chosen = solution.post[np.arange(len(used)), np.maximum(states, 0)]
     place = (
         (p_lo, p_hi, used),
         (obs.first, obs.stop, obs.of_fix, obs.stray, sigma),
         (x, y, radius, np.ascontiguousarray(outlier, np.bool_)),
-        np.ascontiguousarray(chosen, f8),
+        np.ascontiguousarray(solution.post, f8),
         (float(config.thinning_sigmas), float(config.standstill_m), scatter),
         geom,
         (a.node_osm_id, a.edge_u, a.edge_v, a.edge_key),

@@ -33,28 +33,24 @@ from numba import njit
 
 from mapmatch.hmm.emission import distance_score
 from mapmatch.hmm.geometry import network_geometry, point_on_edge
-from mapmatch.hmm.observations import between_kernel, sigma_of_distances
+from mapmatch.hmm.observations import MAD_TO_SIGMA, between_kernel
 from mapmatch.hmm.params import P_ACCEL, P_UTURN_PENALTY, P_UTURN_SPEED
 from mapmatch.hmm.transition import transition_score
 
 if TYPE_CHECKING:
     from typing import Any
 
-    from mapmatch.hmm.observations import Observations
-    from mapmatch.hmm.solution import Solution
-    from mapmatch.types import FloatArray
     from roadnets import RoadNetwork
 
 __all__ = [
     "SCATTER_MIN_OBSERVATIONS",
-    "chosen_distance_m",
+    "chosen_scatter_kernel",
     "collapse_kernel",
     "loop_network",
     "pairwise_sum",
-    "scatter_sigma_m",
 ]
 
-#: Fewest chosen observations from which :func:`scatter_sigma_m` estimates a scatter.
+#: Fewest chosen observations from which :func:`chosen_scatter_kernel` estimates a scatter.
 SCATTER_MIN_OBSERVATIONS = 5
 
 
@@ -428,24 +424,28 @@ def loop_network(net: RoadNetwork) -> tuple[Any, ...]:
     )
 
 
-def chosen_distance_m(solution: Solution) -> FloatArray:
-    """Distance of each used observation's chosen candidate from it (NaN: none chosen)."""
-    states = solution.states
-    rows = solution.cands.ptr[:-1] + np.maximum(states, 0)
-    return np.where(states >= 0, solution.cands.distance_m[rows], np.nan).astype(np.float64)
-
-
-def scatter_sigma_m(obs: Observations, solution: Solution, chosen_m: FloatArray) -> float:
+@njit(cache=True, nogil=True)
+def chosen_scatter_kernel(c_ptr, c_dist, states, used, o_first, o_stop):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
-    The position sigma the matched fixes show about their roads (inf: too few to tell).
+    Each used observation's chosen distance, and the scatter the matched fixes show.
 
-    :func:`~mapmatch.hmm.observations.sigma_of_distances` of the chosen candidates'
-    distances from their observations (``chosen_m``, :func:`chosen_distance_m`), each scaled
-    by the square root of the observation's fix count, since a centroid of ``m`` fixes
-    scatters ``sqrt(m)`` times less.
+    The first: the distance of each used observation's chosen candidate from it (NaN: none
+    chosen). The second: the position sigma the matched fixes show about their roads (inf:
+    fewer than :data:`SCATTER_MIN_OBSERVATIONS` chosen),
+    :data:`~mapmatch.hmm.observations.MAD_TO_SIGMA` x the median of those distances, each
+    scaled by the square root of the observation's fix count, since a centroid of ``m``
+    fixes scatters ``sqrt(m)`` times less.
     """
-    chosen = solution.states >= 0
-    if np.count_nonzero(chosen) < SCATTER_MIN_OBSERVATIONS:
-        return float("inf")
-    fixes = obs.stop[solution.used[chosen]] - obs.first[solution.used[chosen]]
-    return sigma_of_distances(chosen_m[chosen] * np.sqrt(fixes))
+    n = len(states)
+    chosen_m = np.full(n, np.nan)
+    scaled = np.empty(n)
+    m = 0
+    for i in range(n):
+        if states[i] >= 0:
+            chosen_m[i] = c_dist[c_ptr[i] + states[i]]
+            o = used[i]
+            scaled[m] = chosen_m[i] * np.sqrt(float(o_stop[o] - o_first[o]))
+            m += 1
+    if m < SCATTER_MIN_OBSERVATIONS:
+        return chosen_m, np.inf
+    return chosen_m, MAD_TO_SIGMA * np.median(scaled[:m])

@@ -37,6 +37,10 @@ __all__ = [
 ]
 
 
+#: The sigma of a Gaussian over the median of its absolute values (its MAD).
+MAD_TO_SIGMA = 1.4826
+
+
 def sigma_of_distances(distance_m: FloatArray) -> float:
     """
     The position sigma that distances from fixes to their roads show: 1.4826 x their median.
@@ -48,7 +52,7 @@ def sigma_of_distances(distance_m: FloatArray) -> float:
     >>> round(sigma_of_distances(np.array([1.0, 2.0, 3.0, 40.0])), 3)
     3.706
     """
-    return float(1.4826 * np.median(distance_m))
+    return float(MAD_TO_SIGMA * np.median(distance_m))
 
 
 #: A travel between two observations says how far the car went, not just about how far, when
