@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit
 
 from mapmatch.hmm.candidates import Candidates, find_candidates, sigma_radius_kernel
-from mapmatch.hmm.observations import Observations, Travel, merge_fixes, sigma_of_distances
+from mapmatch.hmm.observations import MAD_TO_SIGMA, Observations, Travel, merge_fixes
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -266,12 +266,24 @@ def estimated_sigma_m(obs: Observations, cands: Candidates) -> float:
     the single ones are those that stood out, and their median would overstate the noise.
     NaN otherwise.
     """
-    has = cands.counts > 0
-    single = has & (obs.stop - obs.first == 1)
-    if single.sum() < max(10, 0.5 * has.sum()):
-        return float("nan")
-    nearest = cands.distance_m[cands.ptr[:-1][single]]  # rows of a fix are nearest first
-    return sigma_of_distances(nearest)
+    return float(_nearest_sigma_kernel(cands.ptr, cands.distance_m, obs.first, obs.stop))
+
+
+@njit(cache=True, nogil=True)
+def _nearest_sigma_kernel(c_ptr, c_dist, first, stop):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """:func:`estimated_sigma_m` on the arrays (rows of an observation are nearest first)."""
+    with_roads = 0
+    single = 0
+    nearest = np.empty(len(first))
+    for i in range(len(first)):
+        if c_ptr[i + 1] > c_ptr[i]:
+            with_roads += 1
+            if stop[i] - first[i] == 1:
+                nearest[single] = c_dist[c_ptr[i]]
+                single += 1
+    if single < max(10, 0.5 * with_roads):
+        return np.nan
+    return MAD_TO_SIGMA * np.median(nearest[:single])
 
 
 def with_sigma(fixes: Fixes, sigma_m: float, config: MatchConfig) -> Fixes:

@@ -192,6 +192,20 @@ def test_packed_tree_gives_the_rtree_query_row_for_row(
             assert np.array_equal(getattr(want, name), getattr(got, name)), name
 
 
+def test_packed_tree_query_finding_hundreds_of_segments_matches_the_rtree(
+    default_net: roadnets.RoadNetwork,
+) -> None:
+    # a radius that takes in more segments than the compiled probe's first buffer holds:
+    # the probe counts past it and runs again into a larger one, losing none
+    a = default_net.arrays
+    x, y = np.array([np.median(a.geom_x)]), np.array([np.median(a.geom_y)])
+    want = _query(default_net, "rtree", x, y, 600.0)
+    got = _query(default_net, "packed", x, y, 600.0)
+    assert len(set(want.edge.tolist())) > 600
+    for name in _FIELDS:
+        assert np.array_equal(getattr(want, name), getattr(got, name)), name
+
+
 def test_rtree_lists_every_query_in_one_global_order(melbourne_net: roadnets.RoadNetwork) -> None:
     # what the packed tree's tie order rests on: libspatialindex walks its tree depth first,
     # so the hits of any box come in the order of a query that covers every box
