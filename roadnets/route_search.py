@@ -382,10 +382,15 @@ def table_records(sources, ptr, state, order, copy_ptr, copy_state, from_edge, t
     """
     n = len(from_edge)
     out = np.full(n, -1, dtype=np.int64)
+    last_from, rank = -1, -1  # the matcher's pairs come in runs of one from edge: one look-up a run
     for i in range(n):
         a, b = from_edge[i], to_edge[i]
-        rank = np.searchsorted(sources, a)
-        if rank >= len(sources) or sources[rank] != a:
+        if a != last_from:
+            last_from = a
+            rank = np.searchsorted(sources, a)
+            if rank >= len(sources) or sources[rank] != a:
+                rank = -1
+        if rank < 0:
             continue
         best = find_record(ptr, state, order, rank, b)
         for c in range(copy_ptr[b], copy_ptr[b + 1]):

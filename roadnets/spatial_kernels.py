@@ -19,13 +19,12 @@ _PROBE_PAD_M = 1e-6
 @njit(cache=True, nogil=True)
 def _probe(box, child_lo, child_hi, n_inner, item_box, item_seg, x0, y0, x1, y1, stack, found):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
-    How many segments' boxes meet ``[x0, x1] x [y0, y1]``; the first ``len(found)`` of them
-    are written to ``found``.
+    How many segments' boxes meet ``[x0, x1] x [y0, y1]``; the first of them into ``found``.
 
-    ``stack`` holds at least one entry per tree node (every node is pushed at most once).
-    A count above ``len(found)`` tells the caller to probe again with a larger ``found``:
-    the arrays never grow inside the loop, which keeps it several times faster than a
-    loop that may reallocate them.
+    ``found`` takes the first ``len(found)``; ``stack`` holds at least one entry per tree
+    node (every node is pushed at most once). A count above ``len(found)`` tells the caller
+    to probe again with a larger ``found``: the arrays never grow inside the loop, which
+    keeps it several times faster than a loop that may reallocate them.
     """
     n_found = 0
     capacity = len(found)
@@ -108,10 +107,11 @@ def nearby_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compile
         px, py, r = x[i], y[i], radius[i]
         pad = r + _PROBE_PAD_M
         x0, y0, x1, y1 = px - pad, py - pad, px + pad, py + pad
-        n_found = _probe(box, child_lo, child_hi, n_inner, item_box, item_seg, x0, y0, x1, y1, stack, found)  # fmt: skip
+        tree = (box, child_lo, child_hi, n_inner, item_box, item_seg)
+        n_found = _probe(*tree, x0, y0, x1, y1, stack, found)
         if n_found > len(found):
             found = np.empty(2 * n_found, dtype=np.int64)
-            _probe(box, child_lo, child_hi, n_inner, item_box, item_seg, x0, y0, x1, y1, stack, found)  # fmt: skip
+            _probe(*tree, x0, y0, x1, y1, stack, found)
         ptr[i + 1] = count
         if n_found == 0:
             continue
