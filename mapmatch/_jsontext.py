@@ -468,49 +468,168 @@ class _Writer:
         row starts, and the ``(position, row, text)`` of each number ``repr`` writes instead.
         """
         self._flush()
-        ops, lit, lit_at = _program(tuple(self.ops))
-        rows = self.rows
-        floats = _stacked(self.floats, rows, np.float64)
-        ints = _stacked(self.ints, rows, np.int64)
-        masks = _stacked(self.masks, rows, np.bool_)
-        text, text_at = self._text()
-        out, row_at, slow = _write_rows(
-            rows, sep, ops, lit, lit_at, floats, ints, masks, text, text_at, _POW10
-        )
-        fixes = (
-            [(at, r, self._repr(floats, k, r)) for at, k, r in slow.tolist()] if len(slow) else []
-        )
-        return out.tobytes(), row_at, fixes
+        program = _program(tuple(self.ops))
+        return _render(program, self.rows, self.floats, self.ints, self.masks, self.texts, sep)
 
-    def _repr(self, floats: FloatArray, step: int, row: int) -> str:
-        """What ``repr`` writes for the number of ``step`` in ``row`` (rounded first)."""
-        _, a, _, c = self.ops[step]
-        digits, rounding = divmod(c, 4)
-        value = floats[a, row : row + 1]
-        if rounding == _ROUNDING["python"]:
-            value = py_round(value, digits)
-        elif rounding == _ROUNDING["numpy"]:
-            value = np.round(value, digits)
-        number = float(value[0])
-        return repr(number) if math.isfinite(number) else _NULL
 
-    def _text(self) -> tuple[Any, IntArray]:
-        """The cells of the text columns as one ASCII buffer, and where each one starts."""
-        text_at = np.zeros((len(self.texts), self.rows + 1), dtype=np.int64)
-        if not self.texts:
-            return np.zeros(0, dtype=np.uint8), text_at
-        joined = []
-        base = 0
-        for i, cells in enumerate(self.texts):
-            if len(cells) != self.rows:
-                msg = f"a column has {len(cells)} cells for {self.rows} rows"
-                raise ValueError(msg)
-            ends = list(accumulate(map(len, cells), initial=base))
-            text_at[i] = ends
-            joined.append("".join(cells))
-            base = ends[-1]
-        data = bytearray("".join(joined).encode("ascii"))
-        return np.frombuffer(data, dtype=np.uint8), text_at
+def _render(
+    program: tuple[IntArray, Any, IntArray],
+    rows: int,
+    floats: list[FloatArray],
+    ints: list[Any],
+    masks: list[BoolArray],
+    texts: list[list[str]],
+    sep: int,
+) -> tuple[bytes, IntArray, list[tuple[int, int, str]]]:
+    """:meth:`_Writer.run` of a program and the arrays it reads."""
+    ops, lit, lit_at = program
+    float_rows = _stacked(floats, rows, np.float64)
+    text, text_at = _text(texts, rows)
+    out, row_at, slow = _write_rows(
+        rows, sep, ops, lit, lit_at, float_rows,
+        _stacked(ints, rows, np.int64), _stacked(masks, rows, np.bool_), text, text_at, _POW10,
+    )  # fmt: skip
+    fixes = (
+        [(at, r, _repr(ops, float_rows, k, r)) for at, k, r in slow.tolist()] if len(slow) else []
+    )
+    return out.tobytes(), row_at, fixes
+
+
+def _repr(ops: IntArray, floats: FloatArray, step: int, row: int) -> str:
+    """What ``repr`` writes for the number of ``step`` in ``row`` (rounded first)."""
+    a, c = int(ops[step, 1]), int(ops[step, 3])
+    digits, rounding = divmod(c, 4)
+    value = floats[a, row : row + 1]
+    if rounding == _ROUNDING["python"]:
+        value = py_round(value, digits)
+    elif rounding == _ROUNDING["numpy"]:
+        value = np.round(value, digits)
+    number = float(value[0])
+    return repr(number) if math.isfinite(number) else _NULL
+
+
+def _text(texts: list[list[str]], rows: int) -> tuple[Any, IntArray]:
+    """The cells of the text columns as one ASCII buffer, and where each one starts."""
+    text_at = np.zeros((len(texts), rows + 1), dtype=np.int64)
+    if not texts:
+        return np.zeros(0, dtype=np.uint8), text_at
+    joined = []
+    base = 0
+    for i, cells in enumerate(texts):
+        if len(cells) != rows:
+            msg = f"a column has {len(cells)} cells for {rows} rows"
+            raise ValueError(msg)
+        ends = list(accumulate(map(len, cells), initial=base))
+        text_at[i] = ends
+        joined.append("".join(cells))
+        base = ends[-1]
+    data = bytearray("".join(joined).encode("ascii"))
+    return np.frombuffer(data, dtype=np.uint8), text_at
+
+
+class _Planner(_Writer):
+    """
+    A :class:`_Writer` that also notes where each array of its program came from.
+
+    Each is found again in a table of the same schema by its path (the index of a column
+    among its table's, a tuple's items or a nested table's columns, from the top table
+    down) and what of it is read: ``values``, ``valid`` or ``cells``.
+    """
+
+    __slots__ = ("_next", "_path", "consts", "sources")
+
+    def __init__(self, rows: int) -> None:
+        super().__init__(rows)
+        self._path: list[int] = []  # the column being written, from the top table
+        self._next = [0]  # the index of the next column at each level
+        self.sources: dict[str, list[tuple[int, ...]]] = {
+            "floats": [], "ints": [], "masks": [], "texts": []
+        }  # fmt: skip
+        self.consts: list[tuple[tuple[int, ...], Any]] = []
+
+    def column(self, column: Column) -> None:
+        """Write the column, and note the path of every array it added."""
+        index = self._next[-1]
+        self._next[-1] += 1
+        self._path.append(index)
+        self._next.append(0)
+        counts = len(self.floats), len(self.ints), len(self.texts)
+        super().column(column)
+        path = tuple(self._path)
+        if self._next[-1] == 0:  # a leaf: what was added is its own
+            for kind, before in zip(("floats", "ints", "texts"), counts, strict=True):
+                added = len(getattr(self, kind)) - before
+                self.sources[kind] += [path] * added
+            if isinstance(column, Const):
+                self.consts.append((path, column.value))
+        self._next.pop()
+        self._path.pop()
+
+    def _mask(self, valid: BoolArray | None) -> int:
+        count = len(self.masks)
+        at = super()._mask(valid)
+        if len(self.masks) > count:
+            self.sources["masks"].append(tuple(self._path))
+        return at
+
+
+@dataclass(frozen=True, slots=True)
+class _Plan:
+    """A schema's program, and the paths of its arrays in a table (:class:`_Planner`)."""
+
+    program: tuple[IntArray, Any, IntArray]
+    floats: tuple[tuple[int, ...], ...]
+    ints: tuple[tuple[int, ...], ...]
+    masks: tuple[tuple[int, ...], ...]
+    texts: tuple[tuple[int, ...], ...]
+    consts: tuple[tuple[tuple[int, ...], Any], ...]
+
+    def gather(self, table: Table) -> tuple[list[Any], list[Any], list[Any], list[list[str]]]:
+        """The lists :func:`_render` reads, taken from ``table`` along the paths."""
+        rows = table.rows
+        return (
+            [_find(table, p).values for p in self.floats],
+            [_find(table, p).values for p in self.ints],
+            [_find(table, p).valid for p in self.masks],
+            [_find(table, p).cells(rows) for p in self.texts],
+        )
+
+
+#: The plan of each schema (:attr:`Table.schema`), made on its first table.
+_PLANS: dict[str, _Plan] = {}
+
+
+def _find(table: Table, path: tuple[int, ...]) -> Any:
+    """The column at ``path`` (indices of a table's columns, tuple's items, nested columns)."""
+    node: Any = table
+    for index in path:
+        if isinstance(node, Tuple):
+            node = node.items[index]
+        else:
+            node = (node.table if isinstance(node, Nested) else node).columns[index][1]
+    return node
+
+
+def _planned(table: Table, schema: str, sep: int) -> tuple[bytes, IntArray, list[Any]]:
+    """:meth:`_Writer.run` of ``table`` by its schema's plan (made on the first table)."""
+    plan = _PLANS.get(schema)
+    if plan is None or any(_find(table, p).value != v for p, v in plan.consts):
+        writer = _Planner(table.rows)
+        table.write(writer)
+        writer._flush()
+        src = writer.sources
+        plan = _Plan(
+            _program(tuple(writer.ops)),
+            tuple(src["floats"]), tuple(src["ints"]), tuple(src["masks"]), tuple(src["texts"]),
+            tuple(writer.consts),
+        )  # fmt: skip
+        if len(_PLANS) >= 64:  # schemas are few; never grow without bound
+            _PLANS.clear()
+        _PLANS[schema] = plan
+        arrays = writer.floats, writer.ints, writer.masks, writer.texts
+    else:
+        arrays = plan.gather(table)
+    return _render(plan.program, table.rows, *arrays, sep)
 
 
 def _stacked(columns: list[Any], rows: int, dtype: type) -> Any:
@@ -810,10 +929,17 @@ class Table:
         Number of rows.
     columns
         ``(name, column)`` in member order.
+    schema
+        A name for tables made by the same code every time: the same members and column
+        kinds, masks shared by the same columns, the same decimals and geometry types (a
+        :class:`Const` may change: its value is checked). Its first table's walk over the
+        columns is kept (the program, and where each array sits), and later ones are
+        written from it without walking them again.
     """
 
     rows: int
     columns: Sequence[tuple[str, Column]]
+    schema: str | None = None
 
     def write(self, writer: _Writer) -> None:
         """Write each row's object."""
@@ -830,9 +956,12 @@ class Table:
         """The rows' objects as JSON text joined by commas (no brackets around them)."""
         if self.rows == 0:
             return b""
-        writer = _Writer(self.rows)
-        self.write(writer)
-        text, _, fixes = writer.run(ord(","))
+        if self.schema is not None:
+            text, _, fixes = _planned(self, self.schema, ord(","))
+        else:
+            writer = _Writer(self.rows)
+            self.write(writer)
+            text, _, fixes = writer.run(ord(","))
         return _spliced(text, fixes, 0)
 
     def text(self) -> str:

@@ -235,6 +235,7 @@ def _point_table(result: MatchResult, positions: PathPositions) -> Table:
     return Table(
         n,
         [("type", Const("Feature")), ("geometry", position), ("properties", Nested(properties))],
+        schema="geojson-point",
     )
 
 
@@ -273,6 +274,7 @@ def _edge_json(edges: EdgeTable, part: slice) -> Table:
             ("duration_s", _rounded(edges.duration_s[part], _SECONDS)),
             ("mean_speed_kph", _rounded(edges.mean_speed_kph[part], 2)),
         ],
+        schema="geojson-edges",
     )
 
 
@@ -318,6 +320,7 @@ def _segment_table(result: MatchResult, edges: EdgeTable) -> Table:
             ("geometry", Items([_path(s) for s in segs], geometry="LineString")),
             ("properties", Nested(properties)),
         ],
+        schema="geojson-segment",
     )
 
 

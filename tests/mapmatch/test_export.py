@@ -333,3 +333,30 @@ def test_the_number_kernel_writes_what_repr_writes(decimals: int) -> None:
     )
     cells = Floats(values, decimals=decimals).cells(len(values))
     assert cells == [repr(v) if np.isfinite(v) else "null" for v in values.tolist()]
+
+
+def test_a_table_written_by_its_schemas_plan_is_the_table_walked() -> None:
+    from mapmatch._jsontext import Const, Floats, Ints, Nested, Strings, Table, Tuple
+
+    def table(seed: int, kind: str, schema: str | None) -> Table:
+        rng = np.random.default_rng(seed)
+        n = int(rng.integers(1, 9))
+        valid = rng.random(n) < 0.7
+        inner = Table(n, [("u", Ints(rng.integers(-50, 50, n), valid)), ("x", Ints(np.arange(n)))])
+        return Table(
+            n,
+            [
+                ("kind", Const(kind)),
+                ("at", Tuple((Floats(rng.uniform(-9, 9, n), rounding="numpy"),), valid, "Point")),
+                ("d", Floats(np.where(valid, rng.uniform(0, 1e4, n), np.nan), decimals=2)),
+                ("name", Strings([None if v else "Rue d'Alsace" for v in valid])),
+                ("properties", Nested(inner)),
+            ],
+            schema=schema,
+        )
+
+    for seed in range(12):
+        kind = "point" if seed < 8 else "vertex"  # a Const that changes is written as it is
+        planned = table(seed, kind, "test-schema").ascii()
+        assert planned == table(seed, kind, None).ascii(), seed
+        assert json.loads(b"[" + planned + b"]")[0]["kind"] == kind
