@@ -413,18 +413,20 @@ class RoadNetwork:
         )
 
     def point_on_edge(self, edge: IntArray, offset_m: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Positions (metres) at ``offset_m`` along each ``edge``, vectorised."""
-        a = self.arrays
-        edge = np.asarray(edge, dtype=np.int64)
-        offset = np.clip(np.asarray(offset_m, dtype=np.float64), 0.0, a.edge_length_m[edge])
-        i = self.segment_at(edge, offset)
-        seg = a.geom_cum_m[i + 1] - a.geom_cum_m[i]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            t = np.where(seg > 0, (offset - a.geom_cum_m[i]) / seg, 0.0)
-        t = np.clip(t, 0.0, 1.0)
-        x = a.geom_x[i] + t * (a.geom_x[i + 1] - a.geom_x[i])
-        y = a.geom_y[i] + t * (a.geom_y[i + 1] - a.geom_y[i])
-        return x, y
+        """Positions (metres) at ``offset_m`` along each ``edge`` (clipped to it), vectorised."""
+        from roadnets.spatial_kernels import points_on_edges
+
+        edges, offsets = np.broadcast_arrays(
+            np.asarray(edge, dtype=np.int64), np.asarray(offset_m, dtype=np.float64)
+        )
+        edge = np.ascontiguousarray(edges).ravel()
+        offset = np.ascontiguousarray(offsets).ravel()
+        if len(edge) and (edge.min() < 0 or edge.max() >= self.arrays.n_edges):
+            bad = int(edge[(edge < 0) | (edge >= self.arrays.n_edges)][0])
+            msg = f"edge {bad} is out of range for a network of {self.arrays.n_edges:,} edges"
+            raise IndexError(msg)
+        x, y = points_on_edges(edge, offset, *self.kernel_geometry)
+        return np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
 
     def edge_polyline(
         self, edge: int, start_m: float, end_m: float

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["nearby_kernel", "path_polyline_kernel", "point_on_edge"]
+__all__ = ["nearby_kernel", "path_polyline_kernel", "point_on_edge", "points_on_edges"]
 
 
 #: How much a packed tree's probe box is widened, metres: a segment the exact distance test
@@ -282,6 +282,21 @@ def point_on_edge(edge, offset, edge_len, geom_ptr, geom_x, geom_y, geom_cum, ve
     t = (offset - geom_cum[i]) / seg if seg > 0 else 0.0
     t = min(max(t, 0.0), 1.0)
     return geom_x[i] + t * (geom_x[i + 1] - geom_x[i]), geom_y[i] + t * (geom_y[i + 1] - geom_y[i])
+
+
+@njit(cache=True, nogil=True)
+def points_on_edges(edge, offset, edge_len, geom_ptr, geom_x, geom_y, geom_cum, vertex_pos):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """:func:`point_on_edge` of every place; a NaN offset gives a NaN position."""
+    x = np.empty(len(edge))
+    y = np.empty(len(edge))
+    for k in range(len(edge)):
+        if np.isnan(offset[k]):
+            x[k] = y[k] = np.nan
+        else:
+            x[k], y[k] = point_on_edge(
+                edge[k], offset[k], edge_len, geom_ptr, geom_x, geom_y, geom_cum, vertex_pos
+            )
+    return x, y
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -244,3 +244,29 @@ def test_packed_tree_nodes_cover_their_children(oakland_net: roadnets.RoadNetwor
         else:
             assert np.all(np.arange(lo, hi) > node)  # children come after their parent
     assert np.all(covered == 1)  # every segment in exactly one leaf
+
+
+def test_points_on_edges_are_the_vectorised_interpolation(
+    melbourne_net: roadnets.RoadNetwork,
+) -> None:
+    # the compiled places against the same interpolation in numpy: bit for bit, offsets
+    # before, on and past every vertex and end clipped to the edge, NaN staying NaN
+    a = melbourne_net.arrays
+    rng = np.random.default_rng(7)
+    edge = rng.integers(0, a.n_edges, 2000)
+    length = a.edge_length_m[edge]
+    offset = rng.uniform(-0.2, 1.2, 2000) * length
+    offset[:50] = 0.0
+    offset[50:100] = length[50:100]
+    offset[100:110] = np.nan
+    x, y = melbourne_net.point_on_edge(edge, offset)
+    clipped = np.clip(offset, 0.0, length)
+    i = melbourne_net.segment_at(edge, clipped)
+    seg = a.geom_cum_m[i + 1] - a.geom_cum_m[i]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.clip(np.where(seg > 0, (clipped - a.geom_cum_m[i]) / seg, 0.0), 0.0, 1.0)
+    assert np.array_equal(x, a.geom_x[i] + t * (a.geom_x[i + 1] - a.geom_x[i]), equal_nan=True)
+    assert np.array_equal(y, a.geom_y[i] + t * (a.geom_y[i + 1] - a.geom_y[i]), equal_nan=True)
+    assert np.isnan(x[100:110]).all()
+    with pytest.raises(IndexError, match="out of range"):
+        melbourne_net.point_on_edge(np.array([a.n_edges]), np.array([0.0]))
