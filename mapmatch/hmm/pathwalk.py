@@ -58,24 +58,40 @@ def _ensure(e, lo, hi, size):  # type: ignore[no-untyped-def]  # pragma: no cove
 
 
 @njit(cache=True, nogil=True)
-def _route_edges(rec, r_state, r_pred, state_edge, out, start):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """The edges strictly between a route's ends (its record's predecessors), into ``out``."""
+def _stretches(size):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """Empty ``(edge, lo, hi)`` arrays of ``size`` stretches."""
+    return np.empty(size, dtype=np.int64), np.empty(size), np.empty(size)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _route_length(rec, r_pred):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """How many edges lie strictly between a route's ends (its record's predecessors)."""
     count = 0
     r = r_pred[rec]
     while r >= 0:
         count += 1
         r = r_pred[r]
-    if start + count > len(out):
-        grown = np.empty(max(2 * len(out), start + count), dtype=np.int64)
-        grown[:start] = out[:start]
-        out = grown
+    return count
+
+
+@njit(cache=True, nogil=True)
+def _route_edges(rec, r_state, r_pred, state_edge, out):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    The edges strictly between a route's ends, into ``out`` (long enough); their count.
+
+    ``out`` never grows here: the caller sizes it from :func:`_route_length` first.
+    """
+    count = _route_length(rec, r_pred)
+    if count > len(out):
+        msg = "route longer than its buffer"
+        raise ValueError(msg)
     r = r_pred[rec]
-    k = start + count - 1
+    k = count - 1
     while r >= 0:
         out[k] = state_edge[r_state[r]]
         k -= 1
         r = r_pred[r]
-    return out, count
+    return count
 
 
 @njit(cache=True, nogil=True)
@@ -135,10 +151,26 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     jumps = np.zeros(n_pieces, dtype=np.int64)
     removed = np.zeros(n_pieces, dtype=np.int64)
     em_pad, ox, oy, osigma, params, loop_penalty, loop_net, scatter, chosen_dist = loops
-    path_e, path_lo, path_hi = np.empty(64, dtype=np.int64), np.empty(64), np.empty(64)
-    move_e, move_lo, move_hi = np.empty(64, dtype=np.int64), np.empty(64), np.empty(64)
-    tail_e, tail_lo, tail_hi = np.empty(64, dtype=np.int64), np.empty(64), np.empty(64)
-    via = np.empty(64, dtype=np.int64)
+    # the buffers of one piece's walk, sized ahead from its routes: an array that may grow
+    # inside the walk's loop makes the loop several times slower (numba)
+    longest, grows = 0, 0
+    for p in range(n_pieces):
+        piece = 0
+        for t in range(p_lo[p], p_hi[p] - 1):
+            move = kinds[t, states[t], states[t + 1]]
+            via_t = 0
+            if move != ROUTE_STANDSTILL and move != ROUTE_SAME_EDGE and move != ROUTE_UTURN:
+                rec = pair_rec[
+                    pair_first[t] + states[t] * (c_ptr[t + 2] - c_ptr[t + 1]) + states[t + 1]
+                ]
+                via_t = _route_length(rec, r_pred)
+            longest = max(longest, via_t)
+            piece += via_t + 4  # a step adds at most its move (via + 2) and the front's end
+        grows = max(grows, piece)
+    via = np.empty(max(longest, 1), dtype=np.int64)
+    move_e, move_lo, move_hi = _stretches(longest + 2)
+    tail_e, tail_lo, tail_hi = _stretches(longest + 4)
+    path_e, path_lo, path_hi = _stretches(grows + 1)
     n_out = 0
     has_travel = len(odometer) > 0 or len(speed_m) > 0
     for p in range(n_pieces):
@@ -204,8 +236,7 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
                 rec = pair_rec[
                     pair_first[t] + states[t] * (c_ptr[t + 2] - c_ptr[t + 1]) + states[t + 1]
                 ]
-                via, n_via = _route_edges(rec, r_state, r_pred, state_edge, via, 0)
-                move_e, move_lo, move_hi = _ensure(move_e, move_lo, move_hi, n_via + 2)
+                n_via = _route_edges(rec, r_state, r_pred, state_edge, via)
                 move_e[0], move_lo[0], move_hi[0] = ea, oa, edge_len[ea]
                 for k in range(n_via):
                     e = via[k]
@@ -213,7 +244,6 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
                 move_e[n_via + 1], move_lo[n_via + 1], move_hi[n_via + 1] = eb, 0.0, ob
                 n_move = n_via + 2
             if n_move:
-                tail_e, tail_lo, tail_hi = _ensure(tail_e, tail_lo, tail_hi, n_move + 2)
                 status, n_tail = _continue_from(
                     path_e[n_path - 1], path_lo[n_path - 1], path_hi[n_path - 1],
                     move_e, move_lo, move_hi, n_move, tail_e, tail_lo, tail_hi,
@@ -264,7 +294,9 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
                         path_e[0], path_lo[0], path_hi[0] = tail_e[0], tail_lo[0], tail_hi[0]
                 if n_tail:
                     path_hi[n_path - 1] = tail_hi[0]
-                    path_e, path_lo, path_hi = _ensure(path_e, path_lo, path_hi, n_path + n_tail)
+                    if n_path + n_tail > len(path_e):
+                        msg = "path longer than its buffer"
+                        raise ValueError(msg)
                     for k in range(1, n_tail):
                         done += path_hi[n_path - 1] - path_lo[n_path - 1]
                         path_e[n_path], path_lo[n_path], path_hi[n_path] = (
