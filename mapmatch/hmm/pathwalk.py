@@ -75,13 +75,12 @@ def _route_length(rec, r_pred):  # type: ignore[no-untyped-def]  # pragma: no co
 
 
 @njit(cache=True, nogil=True)
-def _route_edges(rec, r_state, r_pred, state_edge, out):  # type: ignore[no-untyped-def]  # pragma: no cover
+def _route_edges(rec, count, r_state, r_pred, state_edge, out):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
-    The edges strictly between a route's ends, into ``out`` (long enough); their count.
+    The ``count`` edges strictly between a route's ends (:func:`_route_length`), into ``out``.
 
-    ``out`` never grows here: the caller sizes it from :func:`_route_length` first.
+    ``out`` never grows here: the caller sizes it from the routes' lengths first.
     """
-    count = _route_length(rec, r_pred)
     if count > len(out):
         msg = "route longer than its buffer"
         raise ValueError(msg)
@@ -153,19 +152,21 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     em_pad, ox, oy, osigma, params, loop_penalty, loop_net, scatter, chosen_dist = loops
     # the buffers of one piece's walk, sized ahead from its routes: an array that may grow
     # inside the walk's loop makes the loop several times slower (numba)
+    # (each routed step's record and its number of edges between the ends, read by the walk)
+    step_rec = np.full(max(n_used - 1, 0), -1, dtype=np.int64)
+    step_via = np.zeros(max(n_used - 1, 0), dtype=np.int64)
     longest, grows = 0, 0
     for p in range(n_pieces):
         piece = 0
         for t in range(p_lo[p], p_hi[p] - 1):
             move = kinds[t, states[t], states[t + 1]]
-            via_t = 0
             if move != ROUTE_STANDSTILL and move != ROUTE_SAME_EDGE and move != ROUTE_UTURN:
-                rec = pair_rec[
+                step_rec[t] = pair_rec[
                     pair_first[t] + states[t] * (c_ptr[t + 2] - c_ptr[t + 1]) + states[t + 1]
                 ]
-                via_t = _route_length(rec, r_pred)
-            longest = max(longest, via_t)
-            piece += via_t + 4  # a step adds at most its move (via + 2) and the front's end
+                step_via[t] = _route_length(step_rec[t], r_pred)
+            longest = max(longest, step_via[t])
+            piece += step_via[t] + 4  # a step adds at most its move (via + 2) and the front's end
         grows = max(grows, piece)
     via = np.empty(max(longest, 1), dtype=np.int64)
     move_e, move_lo, move_hi = _stretches(longest + 2)
@@ -232,11 +233,8 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
                 move_e[0], move_lo[0], move_hi[0] = ea, oa, turn
                 move_e[1], move_lo[1], move_hi[1] = eb, length - turn, ob
                 n_move = 2
-            else:
-                rec = pair_rec[
-                    pair_first[t] + states[t] * (c_ptr[t + 2] - c_ptr[t + 1]) + states[t + 1]
-                ]
-                n_via = _route_edges(rec, r_state, r_pred, state_edge, via)
+            else:  # a route: the step's record and length from the sizing pass above
+                n_via = _route_edges(step_rec[t], step_via[t], r_state, r_pred, state_edge, via)
                 move_e[0], move_lo[0], move_hi[0] = ea, oa, edge_len[ea]
                 for k in range(n_via):
                     e = via[k]
