@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from mapmatch.hmm.observations import MAD_TO_SIGMA
+from mapmatch.hmm.observations import sigma_of_distances
 from mapmatch.result import MatchedPoints, Segment
 
 if TYPE_CHECKING:
@@ -84,7 +84,7 @@ def odometer_fit(along, odometer, sigma):  # type: ignore[no-untyped-def]  # pra
             if keep[k]:
                 residual[m] = abs(along[k] - a - b * (odometer[k] - base))
                 m += 1
-        scale = max(sigma, MAD_TO_SIGMA * np.median(residual[:m]))
+        scale = max(sigma, sigma_of_distances(residual[:m]))
         for k in range(n):
             if np.isfinite(odometer[k]) and np.isfinite(along[k]):
                 keep[k] = abs(along[k] - a - b * (odometer[k] - base)) <= REJECT_SCALES * scale

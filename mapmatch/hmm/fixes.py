@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit
 
 from mapmatch.hmm.candidates import Candidates, find_candidates, sigma_radius_kernel
-from mapmatch.hmm.observations import MAD_TO_SIGMA, Observations, Travel, merge_fixes
+from mapmatch.hmm.observations import Observations, Travel, merge_fixes, sigma_of_distances
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -283,7 +283,7 @@ def _nearest_sigma_kernel(c_ptr, c_dist, first, stop):  # type: ignore[no-untype
                 single += 1
     if single < max(10, 0.5 * with_roads):
         return np.nan
-    return MAD_TO_SIGMA * np.median(nearest[:single])
+    return sigma_of_distances(nearest[:single])
 
 
 def with_sigma(fixes: Fixes, sigma_m: float, config: MatchConfig) -> Fixes:

@@ -33,7 +33,7 @@ from numba import njit
 
 from mapmatch.hmm.emission import distance_score
 from mapmatch.hmm.geometry import network_geometry, point_on_edge
-from mapmatch.hmm.observations import MAD_TO_SIGMA, between_kernel
+from mapmatch.hmm.observations import between_kernel, sigma_of_distances
 from mapmatch.hmm.params import P_ACCEL, P_UTURN_PENALTY, P_UTURN_SPEED
 from mapmatch.hmm.transition import transition_score
 
@@ -432,7 +432,7 @@ def chosen_scatter_kernel(c_ptr, c_dist, states, used, o_first, o_stop):  # type
     The first: the distance of each used observation's chosen candidate from it (NaN: none
     chosen). The second: the position sigma the matched fixes show about their roads (inf:
     fewer than :data:`SCATTER_MIN_OBSERVATIONS` chosen),
-    :data:`~mapmatch.hmm.observations.MAD_TO_SIGMA` x the median of those distances, each
+    :func:`~mapmatch.hmm.observations.sigma_of_distances` of those distances, each
     scaled by the square root of the observation's fix count, since a centroid of ``m``
     fixes scatters ``sqrt(m)`` times less.
     """
@@ -448,4 +448,4 @@ def chosen_scatter_kernel(c_ptr, c_dist, states, used, o_first, o_stop):  # type
             m += 1
     if m < SCATTER_MIN_OBSERVATIONS:
         return chosen_m, np.inf
-    return chosen_m, MAD_TO_SIGMA * np.median(scaled[:m])
+    return chosen_m, sigma_of_distances(scaled[:m])

@@ -32,13 +32,29 @@ __all__ = [
     "between_kernel",
     "group_fixes",
     "merge_fixes",
+    "sigma_of_distances",
     "travel_arrays",
 ]
 
 
-#: The sigma of a Gaussian over the median of its absolute values (its MAD): the position
-#: sigma that fixes' distances to their roads show, robust to the few far off their road.
+#: The sigma of a Gaussian over the median of its absolute values (its MAD).
 MAD_TO_SIGMA = 1.4826
+
+
+@njit(cache=True, nogil=True)
+def sigma_of_distances(distance_m):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """
+    The position sigma that distances from fixes to their roads show: 1.4826 x their median.
+
+    The median absolute deviation of a Gaussian, robust to the few fixes far off their road.
+    Compiled, for the kernels that estimate a scatter; callable from Python too.
+
+    Examples
+    --------
+    >>> round(sigma_of_distances(np.array([1.0, 2.0, 3.0, 40.0])), 3)
+    3.706
+    """
+    return MAD_TO_SIGMA * np.median(distance_m)
 
 
 #: A travel between two observations says how far the car went, not just about how far, when
