@@ -103,6 +103,11 @@ def listening_sockets(host: str, port: int, count: int, backlog: int) -> list[so
         The address cannot be bound (the port is taken, the host is not this machine's).
     """
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    # proto IPPROTO_TCP, not 0: asyncio sets TCP_NODELAY only on sockets that say they are
+    # TCP, and the connections accepted here inherit it. Without it Nagle holds the answer's
+    # body until the client acknowledges its head, and the client delays that by 40 ms:
+    # measured, every request on 2 workers took 48 ms (3.4 ms on 1 worker, where uvicorn
+    # binds the socket itself).
     out: list[socket.socket] = []
     try:
         with socket.socket(family, socket.SOCK_STREAM) as probe:
@@ -110,7 +115,7 @@ def listening_sockets(host: str, port: int, count: int, backlog: int) -> list[so
             probe.bind((host, port))
             port = probe.getsockname()[1]
         for _ in range(count):
-            sock = socket.socket(family, socket.SOCK_STREAM)
+            sock = socket.socket(family, socket.SOCK_STREAM, socket.IPPROTO_TCP)
             out.append(sock)
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import json
 import os
@@ -323,6 +324,42 @@ def test_each_worker_socket_gets_a_share_of_the_connections() -> None:
     finally:
         for sock in sockets:
             sock.close()
+
+
+def test_connections_on_the_worker_sockets_send_without_delay() -> None:
+    # asyncio sets TCP_NODELAY on an accepted connection only when the listening socket
+    # says it is TCP (proto IPPROTO_TCP); without it Nagle and the client's delayed ACK add
+    # 40 ms to every answer written in more than one piece
+    sockets = listening_sockets("127.0.0.1", 0, 2, 64)
+    nodelay: list[int] = []
+
+    async def connect_some(count: int) -> None:
+        done = asyncio.Event()
+
+        def accepted(_reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+            sock = writer.get_extra_info("socket")
+            nodelay.append(sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY))
+            writer.close()
+            if len(nodelay) == count:
+                done.set()
+
+        servers = [await asyncio.start_server(accepted, sock=sock) for sock in sockets]
+        port = sockets[0].getsockname()[1]
+        clients = [await asyncio.open_connection("127.0.0.1", port) for _ in range(count)]
+        await asyncio.wait_for(done.wait(), timeout=30)
+        for _reader, writer in clients:
+            writer.close()
+        for server in servers:
+            server.close()
+
+    try:
+        assert [sock.proto for sock in sockets] == [socket.IPPROTO_TCP] * 2
+        asyncio.run(connect_some(8))
+    finally:
+        for sock in sockets:
+            sock.close()
+    assert len(nodelay) == 8
+    assert all(flag != 0 for flag in nodelay), nodelay
 
 
 def test_a_taken_port_is_a_clear_error() -> None:
