@@ -16,9 +16,10 @@ per process; PSS shares it out and is the honest total.
     .venv/bin/python benchmarks/bench_service.py --cost-model  # api.costs against peak RSS
 
 ``--abuse`` runs each worker count twice, quiet and then with 4 hostile clients beside the
-ordinary ones, each looping one attack: a gzip bomb (a CSV that inflates to 520 MB), a wide
-CSV (100,000 columns), a body trickled a byte at a time (or promising more than it sends), and
-options that would need gigabytes (10,000 points, 64 candidates in 200 m). It reports the
+ordinary ones (the same ``--client`` kind in both runs), each looping one attack: a gzip bomb
+(a CSV that inflates to 520 MB), a wide CSV (100,000 columns), a body trickled a byte at a
+time (or promising more than it sends), and options that would need gigabytes (10,000
+points, 64 candidates in 200 m). It reports the
 ordinary clients' p99 against the quiet run (must stay within 2x), every 5xx on either side
 (must be 0), the hostile answers by status, and the server's memory before and after.
 
@@ -38,6 +39,7 @@ import sys
 import tempfile
 import time
 import zlib
+from collections.abc import Callable, Coroutine
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -306,7 +308,8 @@ async def load_raw(
 
 
 #: The load generators of ``--client``.
-CLIENTS = {"httpx": load, "raw": load_raw}
+Loader = Callable[..., Coroutine[Any, Any, tuple[int, list[float], dict[str, int]]]]
+CLIENTS: dict[str, Loader] = {"httpx": load, "raw": load_raw}
 
 
 def _gzip_bomb() -> bytes:
@@ -390,10 +393,11 @@ async def hostile(url: str, *, duration_s: float) -> dict[str, dict[str, int]]:
 
 
 async def load_under_attack(
-    url: str, bodies: list[bytes], *, clients: int, duration_s: float
+    url: str, bodies: list[bytes], *, clients: int, duration_s: float, loader: Loader
 ) -> tuple[tuple[int, list[float], dict[str, int]], dict[str, dict[str, int]]]:
+    """The ordinary load with ``loader`` (the quiet run's client kind) beside :func:`hostile`."""
     ordinary, attacks = await asyncio.gather(
-        load(url, bodies, clients=clients, duration_s=duration_s),
+        loader(url, bodies, clients=clients, duration_s=duration_s),
         hostile(url, duration_s=duration_s),
     )
     return ordinary, attacks
@@ -418,7 +422,9 @@ def run(
             raise SystemExit(msg)
         if args.abuse:
             (a_count, a_lat, a_errors), attacks = asyncio.run(
-                load_under_attack(url, bodies, clients=args.clients, duration_s=args.duration_s)
+                load_under_attack(
+                    url, bodies, clients=args.clients, duration_s=args.duration_s, loader=loader
+                )
             )
             rss2, _pss2 = memory_mb(process.pid)
             ABUSE.append(
@@ -473,7 +479,8 @@ def _one_cost(n: int, k: int, r: float, s: float, cache_dir: str) -> None:
     net = roadnets.load(cache_dir=cache_dir)
     cfg = SimulationConfig(interval_s=1.0, noise_m=5.0, route_length_m=3000.0)
     trips = list(simulate_trips(net, cfg, count=30, seed=3))
-    frames, offset = [], 0.0
+    frames: list[pd.DataFrame] = []
+    offset = 0.0
     while sum(len(f) for f in frames) < n:
         for trip in trips:
             frame = trip.trace.to_dataframe().drop(columns="odometer", errors="ignore")
