@@ -23,6 +23,11 @@ points, 64 candidates in 200 m). It reports the
 ordinary clients' p99 against the quiet run (must stay within 2x), every 5xx on either side
 (must be 0), the hostile answers by status, and the server's memory before and after.
 
+``--in-process`` also runs, for each worker count N, N processes that each call the service's
+own request handler (``MatchService.run``: the JSON body parsed, matched, the GeoJSON written)
+on the same bodies in a loop for ``--duration-s``, with no HTTP and no client, and prints the
+HTTP rows' requests/s as a share of that (issue 15: the HTTP path at >= 70 % of in-process).
+
 Bounded: loopback only, a fixed duration, a fixed number of clients.
 """
 
@@ -466,6 +471,66 @@ COST_CONFIGS = [  # points, max_candidates, search_radius_m, sigma_m
 ]
 
 
+def _in_process_worker(
+    cache_dir: str, bodies: list[bytes], warmup_s: float, duration_s: float, barrier: Any, out: Any
+) -> None:
+    """One process of :func:`in_process`: ``MatchService.run`` on the bodies in a loop."""
+    import logging
+
+    from api.app import create_app
+    from api.errors import NotReadyError
+    from api.schemas import MatchQuery
+    from api.settings import Settings
+
+    logging.disable(logging.WARNING)  # the server runs without an access log too
+    service = create_app(Settings(cache_dir=cache_dir)).state.service
+    service.networks.load_all()
+    deadline = time.monotonic() + 120
+    while True:
+        try:
+            service.networks.get(None)
+            break
+        except NotReadyError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.05)
+    query = MatchQuery()
+    stop = time.perf_counter() + warmup_s
+    while time.perf_counter() < stop:
+        for body in bodies:
+            service.run(body, "json", query)
+    barrier.wait()
+    count, started = 0, time.perf_counter()
+    stop = started + duration_s
+    while time.perf_counter() < stop:
+        service.run(bodies[count % len(bodies)], "json", query)
+        count += 1
+    out.put((count, time.perf_counter() - started))
+
+
+def in_process(
+    workers: int, args: argparse.Namespace, bodies: list[bytes], cache_dir: str
+) -> float:
+    """Requests/s of ``workers`` processes each running the service's handler, no HTTP."""
+    import multiprocessing
+
+    spawn = multiprocessing.get_context("spawn")
+    barrier, out = spawn.Barrier(workers), spawn.Queue()
+    procs = [
+        spawn.Process(
+            target=_in_process_worker,
+            args=(cache_dir, bodies, args.warmup_s, args.duration_s, barrier, out),
+        )
+        for _ in range(workers)
+    ]
+    for proc in procs:
+        proc.start()
+    done = [out.get(timeout=args.duration_s + 300) for _ in procs]
+    for proc in procs:
+        proc.join()
+    return float(sum(count / elapsed for count, elapsed in done))
+
+
 def _one_cost(n: int, k: int, r: float, s: float, cache_dir: str) -> None:
     """In a fresh process: peak RSS growth of one match, printed as JSON."""
     import gc
@@ -549,6 +614,11 @@ def main(argv: list[str] | None = None) -> int:
         "--abuse", action="store_true", help="also run the load beside 4 hostile clients"
     )
     parser.add_argument(
+        "--in-process",
+        action="store_true",
+        help="also run the service's handler in N processes without HTTP, for the ratio",
+    )
+    parser.add_argument(
         "--cost-model", action="store_true", help="measure api.costs against peak RSS, then exit"
     )
     parser.add_argument("--one-cost", help=argparse.SUPPRESS)
@@ -569,6 +639,11 @@ def main(argv: list[str] | None = None) -> int:
         results: list[Any] = [
             run(w, c, args, bodies, cache_dir) for c in args.client for w in args.workers
         ]
+        local = (
+            {w: in_process(w, args, bodies, cache_dir) for w in args.workers}
+            if args.in_process
+            else {}
+        )
     print(
         f"\n{len(bodies)} simulated {POINTS}-point 1 Hz traces on the embedded network, JSON "
         f"bodies, {args.clients} clients on loopback, {os.cpu_count()} CPUs shared by clients "
@@ -577,6 +652,20 @@ def main(argv: list[str] | None = None) -> int:
     print(HEADER)
     for result in results:
         print(result.row())
+    if local:
+        print(
+            f"\nIn-process: N processes each running the service's handler (JSON body -> "
+            f"GeoJSON) on the same bodies, no HTTP, no client ({args.duration_s:.0f} s):\n"
+        )
+        print("| workers | client | HTTP req/s | in-process req/s | HTTP / in-process |")
+        print("|---|---|---|---|---|")
+        for result in results:
+            rate = result.requests / result.duration_s
+            base = local[result.workers]
+            print(
+                f"| {result.workers} | {result.client} | {rate:.1f} | {base:.1f} | "
+                f"{100 * rate / base:.0f} % |"
+            )
     if ABUSE:
         print(f"\nThe same load with 4 hostile clients beside it ({args.duration_s:.0f} s):\n")
         print(ABUSE_HEADER)
