@@ -36,13 +36,15 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
+import os
 import tempfile
 import threading
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from math import ceil
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import roadnets
 from mapmatch.batch.executors import WorkerLostError, available_cores, make_executor
@@ -113,6 +115,9 @@ class BatchOptions:
     """
     What to match and how.
 
+    Paths may be given as ``str`` or any ``os.PathLike`` (``pathlib.Path``), and ``inputs``
+    as one path instead of a sequence; they are kept as ``str`` (``out_dir`` as ``Path``).
+
     Attributes
     ----------
     inputs
@@ -167,6 +172,27 @@ class BatchOptions:
     log_level: int | None = None
     id_column: str | None = None
     crs: str = "wgs84"
+
+    def __post_init__(self) -> None:
+        inputs: Any = self.inputs
+        if isinstance(inputs, str | os.PathLike):  # one path, not its characters
+            inputs = (inputs,)
+        if not isinstance(inputs, Iterable):
+            msg = f"inputs must be paths (str or os.PathLike), got {type(inputs).__name__}"
+            raise BatchError(msg)
+        named = tuple(inputs)
+        bad = [p for p in named if not isinstance(p, str | os.PathLike)]
+        if bad:
+            msg = (
+                f"inputs must be paths (str or os.PathLike); got {type(bad[0]).__name__} {bad[0]!r}"
+            )
+            raise BatchError(msg)
+        object.__setattr__(self, "inputs", tuple(os.fspath(p) for p in named))
+        object.__setattr__(self, "out_dir", Path(self.out_dir))
+        for name in ("network", "cache_dir"):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, os.fspath(value))
 
 
 # --------------------------------------------------------------------------- network

@@ -532,3 +532,25 @@ def test_a_batch_makes_the_route_table_once_before_its_workers_start(
     argv = [str(mixed_folder), "--out", str(tmp_path / "out"), "--cache-dir", str(cache)]
     cli_main(["match", *argv, "--workers", "1", "--quiet"])  # the folder holds bad files too
     assert [p.parent.name for p in cache.glob("*/*/meta.json")] == ["routes"]
+
+
+def test_batch_options_take_path_objects_and_one_input(
+    mixed_folder: Path, cache_dir: Path, tmp_path: Path
+) -> None:
+    # the Python API as a user writes it: pathlib paths, one input rather than a tuple
+    from mapmatch.batch import BatchOptions, run_batch
+    from mapmatch.batch.run import BatchError
+
+    options = BatchOptions(
+        inputs=mixed_folder / "a_two.csv",  # type: ignore[arg-type]
+        out_dir=tmp_path / "out",
+        cache_dir=cache_dir,  # type: ignore[arg-type]
+        workers=1,
+    )
+    assert options.inputs == (str(mixed_folder / "a_two.csv"),)
+    assert options.cache_dir == str(cache_dir)
+    report = run_batch(options)
+    assert (report.traces_ok, report.traces_failed) == (2, 0)
+    assert set(_summary(tmp_path / "out")) == {"csv-a", "csv-b"}
+    with pytest.raises(BatchError, match="inputs must be paths"):
+        BatchOptions(inputs=(mixed_folder, 3), out_dir=tmp_path / "x")  # type: ignore[arg-type]
