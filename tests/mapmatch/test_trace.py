@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import contextlib
 import math
 import pickle
 from types import MappingProxyType
@@ -983,3 +984,30 @@ def test_plain_utc_text_times_and_numbers_need_no_pandas(monkeypatch: pytest.Mon
     assert tr.report.time_unit == "iso"
     assert tr.report.reordered_rows == 2
     assert np.diff(tr.time_s).tolist() == [0.0, 8.0, 0.0]
+
+
+def test_a_trace_shares_no_memory_with_the_frame_it_was_read_from() -> None:
+    # number columns are read without pandas' checks, but copied: changing the caller's
+    # frame afterwards (in place, numpy-style) leaves the trace as it was read
+    df = pd.DataFrame(
+        {
+            "time": np.arange(5, dtype=np.int64) + 1_700_000_000,
+            "lat": np.linspace(43.73, 43.74, 5),
+            "lon": np.full(5, 7.42),
+            "speed": np.full(5, 3.0, dtype=np.float32),
+        },
+        index=[10, 11, 12, 13, 14],
+    )
+    trace = Trace.from_dataframe(df)
+    before = (trace.time_s.copy(), trace.lat.copy(), trace.lon.copy(), trace.speed_mps.copy())
+    for column in df.columns:
+        with contextlib.suppress(ValueError):  # pandas >= 3 hands out read-only buffers
+            df[column].to_numpy()[:] = 0  # writes through where pandas hands out its buffer
+        df.loc[12, column] = 1
+    assert [a.tolist() for a in before] == [
+        trace.time_s.tolist(),
+        trace.lat.tolist(),
+        trace.lon.tolist(),
+        trace.speed_mps.tolist(),
+    ]
+    assert trace.time_s.tolist() == [1_700_000_000.0 + i for i in range(5)]
