@@ -999,7 +999,9 @@ def test_a_trace_shares_no_memory_with_the_frame_it_was_read_from() -> None:
         index=[10, 11, 12, 13, 14],
     )
     trace = Trace.from_dataframe(df)
-    before = (trace.time_s.copy(), trace.lat.copy(), trace.lon.copy(), trace.speed_mps.copy())
+    assert trace.speed_mps is not None
+    speed = trace.speed_mps
+    before = (trace.time_s.copy(), trace.lat.copy(), trace.lon.copy(), speed.copy())
     for column in df.columns:
         with contextlib.suppress(ValueError):  # pandas >= 3 hands out read-only buffers
             df[column].to_numpy()[:] = 0  # writes through where pandas hands out its buffer
