@@ -598,7 +598,18 @@ def write_table(result: MatchResult, kind: GeoKind, path: Path, fmt: str) -> Non
         ``"csv"`` (times ISO 8601 UTC, :data:`CSV_TIME_FORMAT`; nulls empty), ``"parquet"``
         (the dtypes kept) or ``"geoparquet"`` (with geometry and GeoParquet metadata, read
         back by ``geopandas.read_parquet``).
+
+    Raises
+    ------
+    ValueError
+        ``kind`` or ``fmt`` is not one of those, before anything is written.
     """
+    if kind not in GEO_KINDS:
+        msg = f"unknown table kind {kind!r}; use one of {', '.join(GEO_KINDS)}"
+        raise ValueError(msg)
+    if fmt not in TABLE_FORMATS:
+        msg = f"unknown table format {fmt!r}; use one of {', '.join(TABLE_FORMATS)}"
+        raise ValueError(msg)
     if fmt == "geoparquet":
         geodataframe(result, kind).to_parquet(path, index=False)
         return
@@ -606,11 +617,8 @@ def write_table(result: MatchResult, kind: GeoKind, path: Path, fmt: str) -> Non
     frame = frames[kind](result)
     if fmt == "csv":
         _iso_times(frame).to_csv(path, index=False)
-    elif fmt == "parquet":
-        frame.to_parquet(path, index=False)
     else:
-        msg = f"unknown table format {fmt!r}; use one of {', '.join(TABLE_FORMATS)}"
-        raise ValueError(msg)
+        frame.to_parquet(path, index=False)
 
 
 def _iso_times(frame: pd.DataFrame) -> pd.DataFrame:

@@ -282,3 +282,14 @@ def test_match_many_on_a_dask_cluster_shares_one_network(
     there = mapmatch.match_many(trips, default_net, client=dask_client, progress=False)
     assert _without_timings(there) == _without_timings(here)
     assert dask_client.status == "running"  # a client given is left open
+
+
+def test_write_table_refuses_an_unknown_kind_or_format_before_writing(
+    result: mapmatch.MatchResult, tmp_path: Path
+) -> None:
+    target = tmp_path / "t.csv"
+    with pytest.raises(ValueError, match="unknown table kind 'lines'; use one of segments"):
+        export.write_table(result, "lines", target, "csv")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="unknown table format 'xlsx'; use one of csv"):
+        export.write_table(result, "edges", target, "xlsx")
+    assert not target.exists()
