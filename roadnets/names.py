@@ -42,6 +42,44 @@ def encode_names(names: Mapping[int, str]) -> tuple[IntArray, IntArray, ByteArra
     return np.asarray(ids, dtype=np.int64), ptr, blob
 
 
+#: Up to this many names are decoded one by one; more, in one joined piece.
+_DECODE_ONE_BY_ONE = 16
+
+
+def _decode_each(blob: ByteArray, start: IntArray, size: IntArray) -> list[str]:
+    """The UTF-8 names ``blob[start:start + size]``, one slice and one decode each."""
+    return [
+        bytes(blob[a : a + n]).decode("utf-8") if n else ""
+        for a, n in zip(start.tolist(), size.tolist(), strict=True)
+    ]
+
+
+def _decode_joined(blob: ByteArray, start: IntArray, size: IntArray) -> list[str]:
+    """
+    The UTF-8 names ``blob[start:start + size]``, gathered NUL-separated and decoded at once.
+
+    Splitting the decoded text at NULs gives the names back unless a name holds a NUL itself
+    (OSM text never does; then more pieces come back than names, which the caller checks);
+    one gather and one decode instead of a slice and a decode per name (about 0.5 us each)
+    for the few hundred edges of a long path.
+
+    Examples
+    --------
+    >>> blob = np.frombuffer("A8Rue Grimaldi".encode(), dtype=np.uint8)
+    >>> _decode_joined(blob, np.array([2, 0, 0]), np.array([12, 0, 2]))
+    ['Rue Grimaldi', '', 'A8']
+    """
+    slot = size + 1  # each name and its NUL
+    at = np.cumsum(slot) - slot  # where each name starts in the joined bytes
+    total = int(at[-1] + size[-1]) if len(at) else 0
+    filled = int(size.sum())
+    first_of = np.repeat(np.cumsum(size) - size, size)  # each byte's name's first byte, joined
+    dest = np.repeat(at, size) + np.arange(filled) - first_of
+    joined = np.zeros(total, dtype=np.uint8)
+    joined[dest] = blob[dest - np.repeat(at, size) + np.repeat(start, size)]
+    return joined.tobytes().decode("utf-8").split("\0") if len(at) else []
+
+
 class WayNames(MutableMapping[int, str]):
     """
     ``{way id: name}`` over the network's name arrays.
@@ -137,7 +175,10 @@ class WayNames(MutableMapping[int, str]):
             return [self.get(way, "") for way in ways.tolist()]
         i = np.minimum(np.searchsorted(self._ids, ways), len(self._ids) - 1)
         found = self._ids[i] == ways
-        lo = np.where(found, self._ptr[i], 0).tolist()
-        hi = np.where(found, self._ptr[i + 1], 0).tolist()
-        blob = self._blob
-        return [bytes(blob[a:b]).decode("utf-8") for a, b in zip(lo, hi, strict=True)]
+        start = np.where(found, self._ptr[i], 0)
+        size = np.where(found, self._ptr[i + 1] - start, 0)
+        if len(ways) > _DECODE_ONE_BY_ONE:
+            names = _decode_joined(self._blob, start, size)
+            if len(names) == len(ways):  # else a name holds a NUL: one by one after all
+                return names
+        return _decode_each(self._blob, start, size)

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import roadnets
+from roadnets.names import encode_names
 from roadnets.route_store import THREAD_NAME
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -101,6 +102,18 @@ def test_way_names_are_arrays_read_like_a_dict(oakland_net: roadnets.RoadNetwork
         del names[way]
     vars(oakland_net).pop("way_names")  # the next read is fresh again
     assert oakland_net.way_names[way] != "<b>x</b>"
+
+
+def test_many_way_names_are_read_at_once_whatever_their_text() -> None:
+    # more than a few names are gathered and decoded in one piece; multi-byte text, empty
+    # names, unknown ways and (never in OSM, but the arrays allow it) a NUL inside a name
+    # all come back as one by one
+    table = {1: "Calle Álvaro Obregón", 2: "", 3: "東京通り", 4: "A\x00B", 9: "Rue Grimaldi"}
+    names = roadnets.WayNames(*encode_names(table))
+    ways = np.array([3, 1, 7, 1, 2, 9, 3, 3, 1, 9, 2, 7, 1, 3, 9, 9, 1, 2, 3, 1])
+    assert names.names_of(ways) == [table.get(int(w), "") for w in ways]
+    with_nul = np.concatenate([ways, [4, 4, 9]])
+    assert names.names_of(with_nul) == [table.get(int(w), "") for w in with_nul]
 
 
 def test_every_array_is_read_only_compiled_or_cached(data_dir: Path, cache_dir: Path) -> None:
