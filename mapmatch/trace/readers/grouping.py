@@ -145,14 +145,15 @@ def group_rows(
         names = [str(v) for v in primary]
     else:
         names = ["/".join(str(keys[c].iat[i]) for c in reversed(cols)) for i in firsts]
-    # the rows in trace order, taken once; each trace is then a contiguous slice (copied, so no
-    # trace is a view of another's rows): a take per trace cost 0.6 ms, 0.6 s for 1,000 traces
+    # the rows in trace order, taken once; each trace is then a contiguous slice of them (a
+    # take per trace cost 0.6 ms, 0.6 s for 1,000 traces). The slices share the taken frame's
+    # memory and no two overlap; a copy each would hold the rows a third time at the peak
     order = np.argsort(codes, kind="stable")
     edges = np.concatenate(([0], np.cumsum(np.bincount(codes, minlength=len(firsts))))).tolist()
     in_order = frame.take(order)
     ordered_numbers = numbers[order]
     traces = []
     for tid, lo, hi in zip(names, edges[:-1], edges[1:], strict=True):
-        sub = in_order.iloc[lo:hi].reset_index(drop=True).copy()
+        sub = in_order.iloc[lo:hi].reset_index(drop=True)
         traces.append(RawTrace(tid, sub, ordered_numbers[lo:hi].copy(), label, where))
     return traces
