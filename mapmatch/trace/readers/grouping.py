@@ -147,7 +147,8 @@ def group_rows(
         names = ["/".join(str(keys[c].iat[i]) for c in reversed(cols)) for i in firsts]
     # the rows in trace order, taken once; each trace is then a contiguous slice of them (a
     # take per trace cost 0.6 ms, 0.6 s for 1,000 traces). The slices share the taken frame's
-    # memory and no two overlap; a copy each would hold the rows a third time at the peak
+    # memory and no two overlap (the readers never write into them); copies cost 9 MB more
+    # at the peak for 1,000 traces and 0.1 s
     order = np.argsort(codes, kind="stable")
     edges = np.concatenate(([0], np.cumsum(np.bincount(codes, minlength=len(firsts))))).tolist()
     in_order = frame.take(order)
