@@ -478,22 +478,14 @@ def _in_process_worker(
     import logging
 
     from api.app import create_app
-    from api.errors import NotReadyError
     from api.schemas import MatchQuery
     from api.settings import Settings
 
     logging.disable(logging.WARNING)  # the server runs without an access log too
     service = create_app(Settings(cache_dir=cache_dir)).state.service
-    service.networks.load_all()
-    deadline = time.monotonic() + 120
-    while True:
-        try:
-            service.networks.get(None)
-            break
-        except NotReadyError:
-            if time.monotonic() > deadline:
-                raise
-            time.sleep(0.05)
+    service.networks.load_all()  # returns loaded, or with the reason it failed
+    if service.networks.failure:
+        raise SystemExit(service.networks.failure)
     query = MatchQuery()
     stop = time.perf_counter() + warmup_s
     while time.perf_counter() < stop:

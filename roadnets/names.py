@@ -69,15 +69,14 @@ def _decode_joined(blob: ByteArray, start: IntArray, size: IntArray) -> list[str
     >>> _decode_joined(blob, np.array([2, 0, 0]), np.array([12, 0, 2]))
     ['Rue Grimaldi', '', 'A8']
     """
-    slot = size + 1  # each name and its NUL
-    at = np.cumsum(slot) - slot  # where each name starts in the joined bytes
-    total = int(at[-1] + size[-1]) if len(at) else 0
+    if not len(size):
+        return []
     filled = int(size.sum())
-    first_of = np.repeat(np.cumsum(size) - size, size)  # each byte's name's first byte, joined
-    dest = np.repeat(at, size) + np.arange(filled) - first_of
-    joined = np.zeros(total, dtype=np.uint8)
-    joined[dest] = blob[dest - np.repeat(at, size) + np.repeat(start, size)]
-    return joined.tobytes().decode("utf-8").split("\0") if len(at) else []
+    within = np.arange(filled) - np.repeat(np.cumsum(size) - size, size)  # byte k of its name
+    at = np.cumsum(size + 1) - (size + 1)  # where each name starts, a NUL after each
+    joined = np.zeros(filled + len(size) - 1, dtype=np.uint8)
+    joined[np.repeat(at, size) + within] = blob[np.repeat(start, size) + within]
+    return joined.tobytes().decode("utf-8").split("\0")
 
 
 class WayNames(MutableMapping[int, str]):

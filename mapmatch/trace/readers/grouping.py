@@ -156,5 +156,5 @@ def group_rows(
     traces = []
     for tid, lo, hi in zip(names, edges[:-1], edges[1:], strict=True):
         sub = in_order.iloc[lo:hi].reset_index(drop=True)
-        traces.append(RawTrace(tid, sub, ordered_numbers[lo:hi].copy(), label, where))
+        traces.append(RawTrace(tid, sub, ordered_numbers[lo:hi], label, where))
     return traces
