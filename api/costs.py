@@ -14,8 +14,9 @@ both:
   its roads (the same R-tree query the matcher runs);
 - :func:`match_cost` takes the request's options and trace: the radius a point's candidates
   can come from (the search radius, widened by a poor accuracy; narrowed by the emission
-  margin, ``sigma x sqrt(1 + 2 x candidate_margin)``), the widest point ``w = min(k,
-  largest count)`` and a typical one ``c = min(k, mean count)``, and returns
+  margin, ``sigma x sqrt(1 + 2 x candidate_margin)``), the widest point ``w = min(2k,
+  largest count)`` and a typical one ``c = min(2k, mean count)`` (``k`` road places are kept,
+  and a place of a two-way road is two directed edges), and returns
 
   ``bytes = points x (PER_POINT + PER_PADDED_PAIR x w^2 + PER_ROUTED_PAIR x c^2)``.
 
@@ -38,6 +39,7 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 
 from api.errors import OverBudgetError
+from mapmatch.hmm.candidates import EDGES_PER_PLACE
 
 if TYPE_CHECKING:
     from mapmatch import MatchConfig, Trace
@@ -155,8 +157,9 @@ def match_cost(trace: Trace, config: MatchConfig, density: CandidateDensity) -> 
     margin_m = sigma * math.sqrt(1.0 + 2.0 * config.candidate_margin)
     reach = min(radius, margin_m) if config.candidate_margin > 0 else radius
     mean, most = density.at(reach)
-    widest = max(1, min(config.max_candidates, math.ceil(most)))
-    typical = max(1.0, min(float(config.max_candidates), mean))
+    kept = EDGES_PER_PLACE * config.max_candidates  # a place of a two-way road is two edges
+    widest = max(1, min(kept, math.ceil(most)))
+    typical = max(1.0, min(float(kept), mean))
     total = n * (PER_POINT + PER_PADDED_PAIR * widest**2 + PER_ROUTED_PAIR * typical**2)
     return MatchCost(points=n, widest=widest, typical=typical, radius_m=reach, bytes=total)
 

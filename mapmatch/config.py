@@ -131,10 +131,13 @@ class MatchConfig:
         4.0, doc="radius of a fix with a poor accuracy, in accuracies", gt=0, le=100
     )
     max_candidates: int = _param(
-        16,
-        doc="directed edges kept per fix; each direction of a two-way road counts and every "
-        "edge at a junction is as near as the junction, so fewer loses the true road there "
-        "(8 tripled the route mismatch at 1 s on Monaco)",
+        12,
+        doc="road places kept per fix: those with the best emission among the twice as many "
+        "nearest directed edges, both directions of a two-way road one place. 16 directed "
+        "edges by distance let a junction's edges crowd out the road the heading agreed with "
+        "(+2 % on realistic-1s Melbourne with the odometer); with 12 places 88 of the "
+        "accuracy matrix's 176 extract cells are within 1 % on 95 % of trips, against 84 "
+        "(16 places: 89, and 8 % slower)",
         kind="int",
         ge=1,
         le=64,

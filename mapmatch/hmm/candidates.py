@@ -17,7 +17,19 @@ if TYPE_CHECKING:
     from mapmatch.types import FloatArray, IntArray
     from roadnets import RoadNetwork
 
-__all__ = ["Candidates", "find_candidates", "search_radii", "sigma_radius_kernel"]
+__all__ = [
+    "EDGES_PER_PLACE",
+    "Candidates",
+    "find_candidates",
+    "search_radii",
+    "sigma_radius_kernel",
+]
+
+#: Directed edges searched per fix, per road place the trellis keeps (``max_candidates``): a
+#: place of a two-way road is two directed edges, and the trellis keeps the places with the
+#: best emission (distance and heading) among those found, so where a junction's many edges
+#: fill the nearest ones, the road the heading agrees with a little farther out still gets in.
+EDGES_PER_PLACE = 2
 
 
 @dataclass(frozen=True, slots=True)
@@ -154,10 +166,11 @@ def find_candidates(
     net: RoadNetwork, x: FloatArray, y: FloatArray, radius_m: FloatArray, config: MatchConfig
 ) -> Candidates:
     """
-    The ``max_candidates`` nearest directed edges within each fix's radius.
+    The :data:`EDGES_PER_PLACE` x ``max_candidates`` nearest directed edges of each fix.
 
-    What :meth:`~roadnets.RoadNetwork.nearby_edges` finds, straight from the packed R-tree's
-    compiled query (one call for every fix, rows already grouped by fix).
+    Within each fix's radius; the trellis keeps the ``max_candidates`` places of them with the
+    best emission. What :meth:`~roadnets.RoadNetwork.nearby_edges` finds, straight from the
+    packed R-tree's compiled query (one call for every fix, rows already grouped by fix).
 
     Parameters
     ----------
@@ -175,7 +188,7 @@ def find_candidates(
         np.ascontiguousarray(x, dtype=np.float64),
         np.ascontiguousarray(y, dtype=np.float64),
         np.ascontiguousarray(radius_m, dtype=np.float64),
-        int(config.max_candidates),
+        EDGES_PER_PLACE * int(config.max_candidates),
         PLACE_SEPARATION_M,
     )
     ptr, edge, dist, offset, qx, qy, dx, dy, twin = nearby_kernel(*args)

@@ -16,7 +16,12 @@ from numba import njit
 from mapmatch.hmm.candidates import Candidates
 from mapmatch.hmm.emission import distance_score, heading_score, speed_weight
 from mapmatch.hmm.observations import between_kernel, travel_arrays
-from mapmatch.hmm.params import P_CANDIDATE_MARGIN, P_MIN_LOG_TRANSITION, model_params
+from mapmatch.hmm.params import (
+    P_CANDIDATE_MARGIN,
+    P_MAX_CANDIDATES,
+    P_MIN_LOG_TRANSITION,
+    model_params,
+)
 from mapmatch.hmm.routes import pairs_kernel, search_bound
 from mapmatch.hmm.solution import Solution
 from mapmatch.hmm.transition import route_inputs, routes_found, table_pays, transitions_kernel
@@ -58,6 +63,39 @@ def _pieces(states, starts):  # type: ignore[no-untyped-def]  # pragma: no cover
 
 
 @njit(cache=True, nogil=True)
+def _best_places(rows, em, c_x, c_y, most):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """
+    Keep, in place, the rows of the ``most`` road places with the best emission.
+
+    ``rows`` are one fix's candidate rows (nearest first) and ``em`` their emissions. A
+    place is a projection point: both directions of a two-way road share theirs and count
+    once, so a place keeps its twin. The kept rows stay nearest first, at the front; returns
+    how many.
+    """
+    order = np.argsort(-em, kind="mergesort")
+    take = np.zeros(len(rows), dtype=np.bool_)
+    places = 0
+    for j in order:
+        twin = False
+        for q in range(len(rows)):
+            if take[q] and c_x[rows[q]] == c_x[rows[j]] and c_y[rows[q]] == c_y[rows[j]]:
+                twin = True
+                break
+        if not twin:
+            if places == most:
+                continue
+            places += 1
+        take[j] = True
+    kept = 0
+    for q in range(len(rows)):
+        if take[q]:
+            rows[kept] = rows[q]
+            em[kept] = em[q]
+            kept += 1
+    return kept
+
+
+@njit(cache=True, nogil=True)
 def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     routing, edge_speed, cands, used, cut_after, obs, travel, params
 ):
@@ -86,6 +124,7 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     em_all = np.empty(total)
     ptr = np.zeros(n + 1, dtype=np.int64)
     margin = params[P_CANDIDATE_MARGIN]
+    most = int(params[P_MAX_CANDIDATES])
     m = 0
     for i in range(n):
         u = used[i]
@@ -105,6 +144,8 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
                 rows[kept] = r
                 em_all[kept] = e
                 kept += 1
+        if kept - m > most:
+            kept = m + _best_places(rows[m:kept], em_all[m:kept], c_x, c_y, most)
         m = kept
         ptr[i + 1] = m
     rows, em = rows[:m], em_all[:m]

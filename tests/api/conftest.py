@@ -221,8 +221,12 @@ def long_trace(trips: list[SimulatedTrip], copies: int) -> Trace:
 
 @pytest.fixture(scope="session")
 def slow_trace(trips: list[SimulatedTrip]) -> Trace:
-    """About 30 000 points with breaks between the trips: a match of about half a second."""
-    trace = long_trace(trips, copies=50)
+    """
+    About 21 000 points with breaks between the trips: a match of about half a second.
+
+    Within the default memory budget (``api.costs`` puts it at about 1.9 of 2 GB).
+    """
+    trace = long_trace(trips, copies=36)
     assert len(trace) > 20_000
     assert np.all(np.diff(trace.time_s) > 0)
     return trace
