@@ -68,9 +68,10 @@ def _best_places(rows, em, c_x, c_y, most):  # type: ignore[no-untyped-def]  # p
     Keep, in place, the rows of the ``most`` road places with the best emission.
 
     ``rows`` are one fix's candidate rows (nearest first) and ``em`` their emissions. A
-    place is a projection point: both directions of a two-way road share theirs and count
-    once, so a place keeps its twin. The kept rows stay nearest first, at the front; returns
-    how many.
+    place is a projection point: both directions of a two-way road share theirs, as do the
+    edges meeting at a junction the fix projects onto, and they count once and are kept
+    together. The kept rows stay nearest first, at the front; returns how many (at most all
+    the rows: the search found :data:`~mapmatch.hmm.candidates.EDGES_PER_PLACE` x ``most``).
     """
     order = np.argsort(-em, kind="mergesort")
     take = np.zeros(len(rows), dtype=np.bool_)
