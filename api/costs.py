@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 
 from api.errors import OverBudgetError
-from mapmatch.hmm.candidates import EDGES_PER_PLACE
+from mapmatch.hmm.candidates import edges_searched
 
 if TYPE_CHECKING:
     from mapmatch import MatchConfig, Trace
@@ -157,7 +157,7 @@ def match_cost(trace: Trace, config: MatchConfig, density: CandidateDensity) -> 
     margin_m = sigma * math.sqrt(1.0 + 2.0 * config.candidate_margin)
     reach = min(radius, margin_m) if config.candidate_margin > 0 else radius
     mean, most = density.at(reach)
-    kept = EDGES_PER_PLACE * config.max_candidates  # a place of a two-way road is two edges
+    kept = edges_searched(config)  # the trellis is never wider than the edges searched
     widest = max(1, min(kept, math.ceil(most)))
     typical = max(1.0, min(float(kept), mean))
     total = n * (PER_POINT + PER_PADDED_PAIR * widest**2 + PER_ROUTED_PAIR * typical**2)

@@ -20,6 +20,7 @@ if TYPE_CHECKING:
 __all__ = [
     "EDGES_PER_PLACE",
     "Candidates",
+    "edges_searched",
     "find_candidates",
     "search_radii",
     "sigma_radius_kernel",
@@ -162,6 +163,19 @@ def search_radii(accuracy_m: FloatArray | None, n: int, config: MatchConfig) -> 
     return np.asarray(radius, dtype=np.float64)
 
 
+def edges_searched(config: MatchConfig) -> int:
+    """
+    How many nearest directed edges are searched per fix: :data:`EDGES_PER_PLACE` per place kept.
+
+    Examples
+    --------
+    >>> from mapmatch.config import MatchConfig
+    >>> edges_searched(MatchConfig(max_candidates=12))
+    24
+    """
+    return EDGES_PER_PLACE * int(config.max_candidates)
+
+
 def find_candidates(
     net: RoadNetwork, x: FloatArray, y: FloatArray, radius_m: FloatArray, config: MatchConfig
 ) -> Candidates:
@@ -188,7 +202,7 @@ def find_candidates(
         np.ascontiguousarray(x, dtype=np.float64),
         np.ascontiguousarray(y, dtype=np.float64),
         np.ascontiguousarray(radius_m, dtype=np.float64),
-        EDGES_PER_PLACE * int(config.max_candidates),
+        edges_searched(config),
         PLACE_SEPARATION_M,
     )
     ptr, edge, dist, offset, qx, qy, dx, dy, twin = nearby_kernel(*args)

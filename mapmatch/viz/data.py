@@ -17,7 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from mapmatch.config import MatchConfig
-from mapmatch.hmm.candidates import EDGES_PER_PLACE
+from mapmatch.hmm.candidates import edges_searched
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -233,7 +233,7 @@ def candidate_table(result: MatchResult, net: RoadNetwork, fix: int) -> pd.DataF
     from the previous model fix's chosen candidate, posterior and whether it was chosen.
     Without diagnostics, or for a fix that did not enter the model, the rows are the directed
     edges the matcher searches around the raw fix (within ``result.config``'s search radius,
-    the nearest :data:`~mapmatch.hmm.candidates.EDGES_PER_PLACE` x ``max_candidates``) and
+    the nearest :func:`~mapmatch.hmm.candidates.edges_searched`) and
     the scores are NaN.
 
     Parameters
@@ -271,8 +271,7 @@ def candidate_table(result: MatchResult, net: RoadNetwork, fix: int) -> pd.DataF
     p = result.points
     config = result.config or MatchConfig()
     x, y = net.project(p.raw_lon[fix : fix + 1], p.raw_lat[fix : fix + 1])
-    searched = EDGES_PER_PLACE * config.max_candidates
-    hits = net.nearby_edges(x, y, config.search_radius_m, max_per_point=searched)
+    hits = net.nearby_edges(x, y, config.search_radius_m, max_per_point=edges_searched(config))
     edge = np.asarray(hits.edge, dtype=np.int64)
     u, v, key = net.edge_osm_ids(edge)
     lon, lat = net.unproject(np.asarray(hits.x), np.asarray(hits.y))
