@@ -155,6 +155,7 @@ def match(
         solution,
         outlier[obs.of_fix],
         fixes.radius_m,
+        fixes.time_s,
         hold_limit_m(fixes, config),
         config,
     )

@@ -242,6 +242,7 @@ def assemble(
     solution: Solution,
     outlier: BoolArray,
     radius_m: FloatArray,
+    time_s: FloatArray,
     hold_limit_m: float,
     config: MatchConfig,
 ) -> Assembled:
@@ -254,7 +255,9 @@ def assemble(
     around it (its own included); a fix that did not enter the model (a stray, an outlier, a
     fix dropped to join a break) farther from that point than its search radius ``radius_m``
     stays unmatched, as do fixes outside every piece. Fixes that entered the model have their
-    observation's confidence, the others the lower of their neighbours'.
+    observation's confidence, the others the lower of their neighbours'. ``time_s`` is every
+    fix's time (NaN throughout without usable times): whether a car turning round had time to
+    reach a dead end's end is read from the gaps between fixes.
     """
     a = net.arrays
     c, used, states = solution.cands, solution.used, solution.states
@@ -274,7 +277,7 @@ def assemble(
         (c.ptr, c.edge, c.offset_m, states, solution.kinds, p_lo, p_hi, used,
          routes.record, routes.table.state, routes.table.pred),
         (obs.first, obs.stop, np.ascontiguousarray(obs.time_s, f8)),
-        (x, y, radius),
+        (x, y, radius, np.ascontiguousarray(time_s, f8)),
         travel_arrays(obs.travel),
         (a.edge_length_m, a.edge_speed_mps, a.edge_u, a.edge_v, a.edge_twin, a.out_ptr,
          net.turns.state_edge, geom),

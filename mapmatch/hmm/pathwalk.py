@@ -42,6 +42,59 @@ def _farthest_reached(edge, from_m, x, y, radius, geom):  # type: ignore[no-unty
     return best if best > -np.inf else from_m
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _gap_s(ftime, first, stop):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """Longest time between consecutive fixes ``first..stop - 1`` (0 for one fix)."""
+    gap = 0.0
+    for i in range(first, stop - 1):
+        gap = max(gap, ftime[i + 1] - ftime[i])
+    return gap
+
+
+@njit(cache=True, nogil=True)
+def _end_in_time(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    t, start, stop, ea, eb, oa, ob, length, speed,
+    c_ptr, c_edge, c_off, states, o_first, o_stop, used, ftime,
+):  # fmt: skip
+    """
+    Whether a car that turns round on dead-end edge ``ea`` had time to reach its end.
+
+    The step ``t -> t + 1`` goes out on ``ea`` (at ``oa``) and back on its twin ``eb`` (at
+    ``ob``). The car may have turned between those observations' fixes, but also within
+    either of them (fixes on the way out and back that merged into one place), or, when the
+    fix beside the turn was already on its way back or still on its way out (a fix on a
+    two-way road is as near either direction, and one that seems to hold still may be the
+    car coming back), one observation earlier or later. It had time when, in one of those
+    gaps between two consecutive fixes, a car at ``speed`` (the road's limit) gets from the
+    fix before it out to the end and back to the fix after it. Without times: no.
+    """
+    a, b = used[t], used[t + 1]
+    back_a = length - oa  # where fix a is on the twin, if it was on its way back
+    out_b = length - ob  # where fix b is on the edge, if it was still on its way out
+    # (distance out to the end and back, time between the fixes around the turn)
+    if (length - oa) + ob <= speed * (ftime[o_first[b]] - ftime[o_stop[a] - 1]):
+        return True
+    if 2.0 * back_a <= speed * _gap_s(ftime, o_first[a], o_stop[a]):
+        return True
+    if 2.0 * ob <= speed * _gap_s(ftime, o_first[b], o_stop[b]):
+        return True
+    if t > start:
+        r = c_ptr[t - 1] + states[t - 1]
+        before = used[t - 1]
+        if c_edge[r] == ea and (length - c_off[r]) + back_a <= speed * (
+            ftime[o_first[a]] - ftime[o_stop[before] - 1]
+        ):
+            return True
+    if t + 2 < stop:
+        r = c_ptr[t + 2] + states[t + 2]
+        after = used[t + 2]
+        if c_edge[r] == eb and (length - out_b) + c_off[r] <= speed * (
+            ftime[o_first[after]] - ftime[o_stop[b] - 1]
+        ):
+            return True
+    return False
+
+
 @njit(cache=True, nogil=True)
 def _ensure(e, lo, hi, size):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     """The row arrays grown to hold ``size`` rows."""
@@ -118,7 +171,8 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
 
     ``solution`` is ``(cand ptr, edge, offset, states, kinds, piece starts, piece stops,
     used, pair records, route states, route predecessors)``, ``obs`` the observations'
-    ``(first, stop, time)``, ``fixes`` every fix's ``(x, y, radius)``, ``travel`` the
+    ``(first, stop, time)``, ``fixes`` every fix's ``(x, y, radius, time)``
+    (``time`` NaN throughout without usable times), ``travel`` the
     observations' travel arrays, ``net`` ``(edge_len, edge_speed, edge_u, edge_v, edge_twin,
     out_ptr, state_edge, geom)`` (``geom`` as :func:`stretch_vertices` reads it).
 
@@ -133,7 +187,7 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     """
     c_ptr, c_edge, c_off, states, kinds, p_lo, p_hi, used, pair_rec, r_state, r_pred = solution
     o_first, o_stop, o_time = obs
-    fx, fy, fradius = fixes
+    fx, fy, fradius, ftime = fixes
     edge_len, edge_speed, edge_u, edge_v, _, out_ptr, state_edge, geom = net
     odometer, speed_m, slack_m, unknown_lo, unknown_hi = travel
     n_pieces = len(p_lo)
@@ -216,18 +270,20 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
                     ),
                 )
                 node = edge_v[ea]
-                to_end = (length - oa) + ob  # out to the end and back to b
-                dt = o_time[used[t + 1]] - o_time[used[t]]
-                timed_reach = edge_speed[ea] * dt  # NaN without times
                 travel_t = piece_travel[t - start]
                 if np.isfinite(travel_t):  # out to the turn and back covers the travel
                     turn = max(turn, 0.5 * (travel_t + oa + length - ob))
-                    timed_reach = np.nan  # the travel says where it turned
-                if out_ptr[node + 1] - out_ptr[node] <= 1 and (
-                    length - turn <= 0.5 * hold_limit or to_end <= timed_reach
-                ):
+                dead_end = out_ptr[node + 1] - out_ptr[node] <= 1
+                if dead_end and length - turn > 0.5 * hold_limit:
+                    # where the travel is known it says where the car turned; else the time
+                    dead_end = not np.isfinite(travel_t) and _end_in_time(
+                        t, start, stop, ea, eb, oa, ob, length, edge_speed[ea],
+                        c_ptr, c_edge, c_off, states, o_first, o_stop, used, ftime,
+                    )  # fmt: skip
+                if dead_end:
                     # a dead end is driven to its end, where there is room to turn, unless the
                     # time between the fixes is too short to get there and back at its limit
+                    # (_end_in_time)
                     turn = length
                 turn = min(turn, length)
                 move_e[0], move_lo[0], move_hi[0] = ea, oa, turn

@@ -85,6 +85,7 @@ def solve_window(
         solution,
         outlier[model.obs.of_fix],
         model.fixes.radius_m,
+        model.fixes.time_s,
         hold_limit_m,
         config,
     )

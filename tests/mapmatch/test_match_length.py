@@ -234,6 +234,28 @@ def test_a_drive_into_a_dead_end_and_back_between_5_s_fixes_keeps_the_spur(
     assert result.distance_check.uturns == 1
 
 
+@pytest.mark.parametrize("start_x", [-275.0, -295.0])
+def test_a_fifteen_second_drive_to_a_dead_ends_end_keeps_the_end(
+    tmp_path: Path, start_x: float
+) -> None:
+    # 300 m into a dead end and back at 7 m/s, exact fixes every 15 s, positions only. From
+    # -275 the two fixes around the turn lie 50 and 55 m short of the end, 5 m apart: they
+    # merge into one place, and the 100 m out to the end and back were lost, though the 15 s
+    # between them leave time for it at the road's 30 km/h; from -295 the fix beside the turn
+    # lies 35 m past the end, as near the way out as the way back: the end is kept whichever
+    # way the match reads that fix
+    roads = [
+        (1, [(-500.0, 0.0), (0.0, 0.0), (500.0, 0.0)], RESIDENTIAL),
+        (2, [(0.0, 0.0), (0.0, 300.0)], RESIDENTIAL),
+    ]
+    net = load(write_osm(tmp_path / "dead_end.osm", roads))
+    path = [(start_x, 0.0), (0.0, 0.0), (0.0, 300.0), (0.0, 0.0), (400.0, 0.0)]
+    x, y, _, t = drive(path, speed_mps=7.0, interval_s=15.0)
+    result = mapmatch.match(trace_of(x, y, time_s=t), net)
+    assert result.matched_length_m == pytest.approx(7.0 * t[-1], abs=2.0)
+    assert result.distance_check.uturns == 1
+
+
 def _sparse_drive_with_odometer(ends_off_m: tuple[float, float], scale: float) -> mapmatch.Trace:
     """
     A 15 s trace along 2.4 km of road, the first and last fix displaced along it by ``ends_off_m``.
