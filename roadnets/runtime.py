@@ -144,7 +144,8 @@ def warm_kernels() -> KernelWarmup:
     Compile (or load from numba's cache) every roadnets kernel, before it is needed.
 
     Runs the node router, the edge router (pairs and tables, lengths and caller costs), the
-    table look-ups and the R-tree query once each on a 3 x 3 block network built in memory.
+    table look-ups, the projection both ways and the R-tree query once each on a 3 x 3 block
+    network built in memory.
     Cheap when the kernels are already in numba's on-disk cache; seconds on a fresh install.
 
     Returns
@@ -170,6 +171,7 @@ def warm_kernels() -> KernelWarmup:
     )
     routes.table.lookup(edges[:2], edges[:2])
     x, y = net.project(np.array([7.4205]), np.array([43.7305]))
+    net.unproject(x, y)
     net.nearby_edges(x, y, 50.0)
     net.path_polyline(edges[:2], np.zeros(2), a.edge_length_m[:2])
     net.precompute_routes(1000.0)

@@ -93,6 +93,31 @@ def test_project_then_unproject_returns_the_point_within_1_mm(
     assert abs(d) * metres_per_deg * np.cos(np.radians(p_lat[0])) < 1e-3
 
 
+@given(
+    lon=st.floats(min_value=-179.9, max_value=179.9),
+    lat=st.floats(min_value=-84.0, max_value=84.0),
+    east_m=st.floats(min_value=-300e3, max_value=300e3),
+    north_m=st.floats(min_value=-300e3, max_value=300e3),
+)
+def test_the_compiled_projection_is_projs_to_a_few_nanometres(
+    lon: float, lat: float, east_m: float, north_m: float
+) -> None:
+    # Projector.local projects with roadnets.tmerc; PROJ's own pipeline for the same CRS is the
+    # reference, up to 300 km from the centre (a network reaches at most about 285 km)
+    projector = Projector.local(lon, lat)
+    proj = Proj(projector.crs)
+    p_lon, p_lat = proj(east_m, north_m, inverse=True)
+    if not (np.isfinite(p_lon) and np.isfinite(p_lat)) or abs(p_lat) > 89.0:
+        return
+    x, y = projector.forward(np.array([p_lon]), np.array([p_lat]))
+    ref_x, ref_y = proj(p_lon, p_lat)
+    assert abs(x[0] - ref_x) < 1e-8
+    assert abs(y[0] - ref_y) < 1e-8
+    back_lon, back_lat = projector.inverse(np.array([ref_x]), np.array([ref_y]))
+    assert abs((back_lon[0] - p_lon + 180.0) % 360.0 - 180.0) < 1e-12
+    assert abs(back_lat[0] - p_lat) < 1e-12
+
+
 def test_the_local_projection_is_true_to_scale_at_its_centre() -> None:
     projector = Projector.local(7.42, 43.73)
     lon, lat = np.array([7.41, 7.43]), np.array([43.72, 43.74])
