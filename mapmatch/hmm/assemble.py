@@ -5,7 +5,8 @@ ever moves forward: a fix that the model holds still (a slow or stopped car's fi
 little backwards, :data:`~mapmatch.hmm.routes.ROUTE_STANDSTILL`) leaves the path where it is, and
 the next move starts from the farthest point reached, not from the scattered fix. So noise
 around a stop never adds length. A U-turn in the middle of a road turns at the farthest point
-the fixes in between reached along the road (a dead end's end, when the fixes got there).
+the fixes in between reached along the road, or a dead end's end when the fixes got within a
+held car's scatter of it or the time between them left the car time to get there and back.
 
 Fixes left out of the model (a stopped car's repeats, outliers, fixes dropped to join a break)
 are placed at the nearest point of the path between their neighbours' positions; one whose

@@ -274,7 +274,7 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
                 if np.isfinite(travel_t):  # out to the turn and back covers the travel
                     turn = max(turn, 0.5 * (travel_t + oa + length - ob))
                 dead_end = out_ptr[node + 1] - out_ptr[node] <= 1
-                if dead_end and length - turn > 0.5 * hold_limit:
+                if dead_end and length - turn > hold_limit:
                     # where the travel is known it says where the car turned; else the time
                     dead_end = not np.isfinite(travel_t) and _end_in_time(
                         t, start, stop, ea, eb, oa, ob, length, edge_speed[ea],
@@ -283,7 +283,8 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
                 if dead_end:
                     # a dead end is driven to its end, where there is room to turn, unless the
                     # time between the fixes is too short to get there and back at its limit
-                    # (_end_in_time)
+                    # (_end_in_time); fixes that stop short of the end by less than a held
+                    # car's scatter (hold_limit) cannot tell a turn there from one at the end
                     turn = length
                 turn = min(turn, length)
                 move_e[0], move_lo[0], move_hi[0] = ea, oa, turn

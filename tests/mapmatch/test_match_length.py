@@ -256,6 +256,28 @@ def test_a_fifteen_second_drive_to_a_dead_ends_end_keeps_the_end(
     assert result.distance_check.uturns == 1
 
 
+@pytest.mark.parametrize("short_m", [8.0, 14.0, 18.0])
+def test_fixes_that_stop_short_of_a_dead_ends_end_keep_the_end(
+    tmp_path: Path, short_m: float
+) -> None:
+    # 1 s fixes into a 60 m dead end and back, every fix beyond 60 - short_m pulled back to
+    # there (correlated error holds a run of fixes to one side): the fixes stop short of the
+    # end by less than a held car's scatter (4 sigma, 20 m at the assumed 5 m), so they cannot
+    # tell a turn there from one at the end, where a car turns round. At 14 m short the match
+    # turned 14 m short (it took 2 sigma of the end to be the end).
+    roads = [
+        (1, [(-200.0, 0.0), (0.0, 0.0), (200.0, 0.0)], RESIDENTIAL),
+        (2, [(0.0, 0.0), (0.0, 60.0)], RESIDENTIAL),
+    ]
+    net = load(write_osm(tmp_path / "dead_end.osm", roads))
+    x, y, _, t = drive(
+        [(-100.0, 0.0), (0.0, 0.0), (0.0, 60.0), (0.0, 0.0), (100.0, 0.0)], speed_mps=5.0
+    )
+    result = mapmatch.match(trace_of(x, np.minimum(y, 60.0 - short_m), time_s=t), net)
+    assert result.matched_length_m == pytest.approx(320.0, abs=1.0)
+    assert result.distance_check.uturns == 1
+
+
 def _sparse_drive_with_odometer(ends_off_m: tuple[float, float], scale: float) -> mapmatch.Trace:
     """
     A 15 s trace along 2.4 km of road, the first and last fix displaced along it by ``ends_off_m``.
