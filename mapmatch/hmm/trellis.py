@@ -22,6 +22,7 @@ from mapmatch.hmm.params import (
     P_MIN_LOG_TRANSITION,
     model_params,
 )
+from mapmatch.hmm.pathwalk import EPS_M
 from mapmatch.hmm.routes import pairs_kernel, search_bound
 from mapmatch.hmm.solution import Solution
 from mapmatch.hmm.transition import route_inputs, routes_found, table_pays, transitions_kernel
@@ -70,8 +71,10 @@ def _best_places(rows, em, c_x, c_y, most):  # type: ignore[no-untyped-def]  # p
     ``rows`` are one fix's candidate rows (nearest first) and ``em`` their emissions. A
     place is a projection point: both directions of a two-way road share theirs, as do the
     edges meeting at a junction the fix projects onto, and they count once and are kept
-    together. The kept rows stay nearest first, at the front; returns how many (at most all
-    the rows: the search found :data:`~mapmatch.hmm.candidates.EDGES_PER_PLACE` x ``most``).
+    together (points within :data:`~mapmatch.hmm.pathwalk.EPS_M` of each other are one: a
+    twin's projection may differ in its last bits). The kept rows stay nearest first, at the
+    front; returns how many (at most all the rows: the search found
+    :data:`~mapmatch.hmm.candidates.EDGES_PER_PLACE` x ``most``).
     """
     order = np.argsort(-em, kind="mergesort")
     take = np.zeros(len(rows), dtype=np.bool_)
@@ -79,7 +82,11 @@ def _best_places(rows, em, c_x, c_y, most):  # type: ignore[no-untyped-def]  # p
     for j in order:
         twin = False
         for q in range(len(rows)):
-            if take[q] and c_x[rows[q]] == c_x[rows[j]] and c_y[rows[q]] == c_y[rows[j]]:
+            if (
+                take[q]
+                and abs(c_x[rows[q]] - c_x[rows[j]]) <= EPS_M
+                and abs(c_y[rows[q]] - c_y[rows[j]]) <= EPS_M
+            ):
                 twin = True
                 break
         if not twin:

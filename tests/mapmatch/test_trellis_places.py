@@ -32,3 +32,13 @@ def test_the_twin_of_a_kept_place_is_kept_even_when_its_emission_is_poor() -> No
 
 def test_fewer_places_than_allowed_keep_every_row() -> None:
     assert _kept([-3.0, -1.0, -2.0], [0, 1, 1], most=5) == [0, 1, 2]
+
+
+def test_a_twin_projected_a_few_ulps_apart_is_still_one_place() -> None:
+    # a two-way road's two directions project a fix through their own (reversed) geometry,
+    # which can land 1e-15 m apart: they are still one place, and leave room for the next
+    rows = np.arange(4, dtype=np.int64)
+    x = np.array([100.0, 100.0 + 1.4e-14, 200.0, 300.0])
+    em = np.array([-1.0, -9.0, -2.0, -3.0])
+    assert _best_places(rows, em, x, np.zeros(4), 2) == 3
+    assert rows[:3].tolist() == [0, 1, 2]
