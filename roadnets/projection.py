@@ -63,8 +63,6 @@ FloatArray = npt.NDArray[np.float64]
 #: Largest planar scale error accepted anywhere on a network (0.1 %).
 MAX_SCALE_ERROR = 1e-3
 
-#: What follows a :meth:`Projector.local` CRS's origin.
-_LOCAL_TAIL = "+k_0=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs +type=crs"
 _TMERC = re.compile(r"^\+proj=tmerc \+lat_0=(?P<lat>\S+) \+lon_0=(?P<lon>\S+) \+k_0=1 ")
 
 #: Mean Earth radius (IUGG), metres: for the scale-error estimate only.
@@ -156,22 +154,12 @@ def _transformers(crs: str, thread: int) -> tuple[Transformer, Transformer, str]
     """
     Make the transformers to and from a CRS, once per thread (they are not thread-safe).
 
-    Returns them and the direction that unprojects with the second. A
-    :meth:`Projector.local` CRS is built as an explicit PROJ pipeline (0.1 ms); letting PROJ
-    search its database for the operation between two CRS definitions costs 20-30 ms per
-    transformer, which every new worker thread would pay.
+    Returns them and the direction that unprojects with the second. Only CRSs that are not
+    :meth:`Projector.local` ones come here (those are projected by :func:`_local`).
     """
     from pyproj import Transformer
 
     del thread  # part of the cache key only
-    found = _TMERC.match(crs)
-    if found:
-        pipeline = Transformer.from_pipeline(
-            "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad "
-            f"+step +proj=tmerc +lat_0={found['lat']} +lon_0={found['lon']} +k_0=1 "
-            "+x_0=0 +y_0=0 +ellps=WGS84"
-        )
-        return pipeline, pipeline, "INVERSE"
     to_metric = Transformer.from_crs("EPSG:4326", crs, always_xy=True)
     return to_metric, Transformer.from_crs(crs, "EPSG:4326", always_xy=True), "FORWARD"
 
@@ -182,7 +170,7 @@ def _local(crs: str) -> TransverseMercator | None:
     from roadnets.tmerc import TransverseMercator  # numba: not at import
 
     found = _TMERC.match(crs)
-    if found is None or not crs.endswith(_LOCAL_TAIL):
+    if found is None:
         return None
     return TransverseMercator.of(float(found["lon"]), float(found["lat"]))
 
@@ -215,7 +203,10 @@ class Projector:
 
         Coordinates are metres east and north of the origin on the WGS84 ellipsoid.
         """
-        definition = f"+proj=tmerc +lat_0={lat_0:.6f} +lon_0={lon_0:.6f} {_LOCAL_TAIL}"
+        definition = (
+            f"+proj=tmerc +lat_0={lat_0:.6f} +lon_0={lon_0:.6f} +k_0=1 +x_0=0 +y_0=0 "
+            "+ellps=WGS84 +units=m +no_defs +type=crs"
+        )
         return cls(definition)
 
     @property

@@ -69,10 +69,10 @@ def _end_in_time(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     fix before it out to the end and back to the fix after it. Without times: no.
     """
     a, b = used[t], used[t + 1]
-    back_a = length - oa  # where fix a is on the twin, if it was on its way back
-    out_b = length - ob  # where fix b is on the edge, if it was still on its way out
+    # how far fix a lies from the end (on either way) is length - oa, fix b's is ob
+    back_a = length - oa
     # (distance out to the end and back, time between the fixes around the turn)
-    if (length - oa) + ob <= speed * (ftime[o_first[b]] - ftime[o_stop[a] - 1]):
+    if back_a + ob <= speed * (ftime[o_first[b]] - ftime[o_stop[a] - 1]):
         return True
     if 2.0 * back_a <= speed * _gap_s(ftime, o_first[a], o_stop[a]):
         return True
@@ -88,7 +88,7 @@ def _end_in_time(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     if t + 2 < stop:
         r = c_ptr[t + 2] + states[t + 2]
         after = used[t + 2]
-        if c_edge[r] == eb and (length - out_b) + c_off[r] <= speed * (
+        if c_edge[r] == eb and ob + c_off[r] <= speed * (
             ftime[o_first[after]] - ftime[o_stop[b] - 1]
         ):
             return True
