@@ -13,7 +13,10 @@ scored once as driven (their chosen candidates and moves) and once as a car that
 place where the loop starts (every fix's emission there, no moves), each with the moves into
 and out of the loop. A loop stays only when it explains the fixes better by at least
 ``loop_penalty`` nats; a car going round a block or into a dead end has fixes all along the
-loop, far from its start, and keeps it easily. A loop that turns round and could not be
+loop, far from its start, and keeps it easily. Holding where the loop begins pays for a U-turn
+there when the path without the loop turns round at that place and drives back further than a
+held car scatters (a car that drove into a dead-end spur off a junction and came back the way
+it came), as Viterbi would have charged it. A loop that turns round and could not be
 driven in the time between its fixes, the car slowing to ``uturn_speed_mps`` to turn and
 neither braking nor accelerating faster than ``travel_accel_mps2``, is taken out whatever its
 price: a burst of fixes to one side at 1 s no longer buys a 20 m spur out and back in a second.
@@ -34,7 +37,13 @@ from numba import njit
 from mapmatch.hmm.emission import distance_score
 from mapmatch.hmm.geometry import network_geometry, point_on_edge
 from mapmatch.hmm.observations import between_kernel, sigma_of_distances
-from mapmatch.hmm.params import P_ACCEL, P_UTURN_PENALTY, P_UTURN_SPEED
+from mapmatch.hmm.params import (
+    P_ACCEL,
+    P_STANDSTILL_M,
+    P_STANDSTILL_SIGMAS,
+    P_UTURN_PENALTY,
+    P_UTURN_SPEED,
+)
 from mapmatch.hmm.transition import transition_score
 
 if TYPE_CHECKING:
@@ -367,6 +376,33 @@ def _gain(along, e, lo, hi, place_x, place_y, s0, s1, model, travel, net):  # ty
 
 
 @njit(cache=True, nogil=True)
+def _turn_round_held(e, lo, hi, ce, clo, chi, along, s0, s1, model, net):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    What holding where a loop begins pays for a turn round there: a U-turn, or nothing.
+
+    A car held at the loop's start that then drives back the way it came (out of a dead-end
+    spur off a junction onto the road it came by) turned round there, as Viterbi would have
+    charged it: it does when the path without the loop (``ce, clo, chi``) turns round at
+    ``s0`` where the path with it did not, and a fix after the loop lies further along than
+    a held car's scatter (a parked car's fixes a few metres back are no drive back).
+    """
+    start, used, osigma, params = model[0], model[1], model[7], model[8]
+    edge_len, edge_v, edge_twin, out_ptr = net[0], net[2], net[3], net[6]
+    made = _turns(ce, clo, chi, s0, s0, edge_len, edge_v, edge_twin, out_ptr)[0]
+    had = (
+        _turns(e, lo, hi, s0, s0, edge_len, edge_v, edge_twin, out_ptr)[0]
+        + _turns(e, lo, hi, s1, s1, edge_len, edge_v, edge_twin, out_ptr)[0]
+    )
+    if made <= had:
+        return 0.0
+    for q in range(len(along)):
+        scatter = max(params[P_STANDSTILL_M], params[P_STANDSTILL_SIGMAS] * osigma[used[start + q]])
+        if along[q] - s1 > scatter:
+            return (made - had) * params[P_UTURN_PENALTY]
+    return 0.0
+
+
+@njit(cache=True, nogil=True)
 def collapse_kernel(e, lo, hi, along, model, travel, net):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
     Take out the loops of one piece's path that do not pay for themselves.
@@ -393,6 +429,10 @@ def collapse_kernel(e, lo, hi, along, model, travel, net):  # type: ignore[no-un
             if gain >= loop_penalty:
                 continue
             ce, clo, chi = _cut(e, lo, hi, s0, s1)
+            if gain + _turn_round_held(e, lo, hi, ce, clo, chi, along, s0, s1, model, net) >= (
+                loop_penalty
+            ):
+                continue
             if _legal(ce, edge_u, edge_v, trans_ptr, trans_to, state_edge):
                 # a loop that a turn restriction forces stays
                 e, lo, hi = ce, clo, chi

@@ -25,6 +25,9 @@ if TYPE_CHECKING:
     from roadnets import EdgeRoutes, RoadNetwork
 
 __all__ = [
+    "ARRIVAL_HELD",
+    "ARRIVAL_SAME",
+    "ARRIVAL_UNKNOWN",
     "ROUTE_SAME_EDGE",
     "ROUTE_STANDSTILL",
     "ROUTE_UTURN",
@@ -50,6 +53,12 @@ __all__ = [
 #: graph route), or not at all: the next fix lies a little behind, which is noise around a
 #: slow or stopped car, so the car holds its position (:func:`standstill_distances`).
 ROUTE_SAME_EDGE, ROUTE_VIA_GRAPH, ROUTE_UTURN, ROUTE_UTURN_AT_NODE, ROUTE_STANDSTILL = 0, 1, 2, 3, 4
+
+#: What a state knows of the edge the car drove onto its edge from (its *arrival*), when not
+#: an edge: nothing yet (a piece's first fix), the same as the state before (the move stayed
+#: on one edge), or nothing that lets it hold further back (it holds across edges already).
+#: A fix held behind its predecessor on another edge is a held car only on the arrival edge.
+ARRIVAL_UNKNOWN, ARRIVAL_SAME, ARRIVAL_HELD = -1, -2, -3
 
 
 @dataclass(frozen=True, slots=True)

@@ -44,6 +44,10 @@ from mapmatch.hmm.params import (
     model_params,
 )
 from mapmatch.hmm.routes import (
+    ARRIVAL_HELD,
+    ARRIVAL_SAME,
+    ARRIVAL_UNKNOWN,
+    ROUTE_SAME_EDGE,
     ROUTE_STANDSTILL,
     ROUTE_UTURN,
     ROUTE_UTURN_AT_NODE,
@@ -268,7 +272,7 @@ def _pair_routes(graph, ws, scratch, uturn_cost_m, table, from_edge, to_edge, bo
     length, time and U-turns.
     """
     t_bound, t_sources, t_ptr, t_state, t_order, t_dist, t_time, t_turns, copy_ptr, copy_state = (
-        table
+        table[:10]
     )
     fits = t_bound > -np.inf  # no table (bound -inf) never fits, even with no pairs
     total = 0.0
@@ -293,6 +297,31 @@ def _pair_routes(graph, ws, scratch, uturn_cost_m, table, from_edge, to_edge, bo
     out = route_pairs_kernel(graph, from_edge, to_edge, bounds, uturn_cost_m, ws, scratch)
     searched = out[:11]
     return False, searched, out[11], out[12], out[13], out[14]
+
+
+@njit(cache=True, nogil=True)
+def _arrivals_of(rec, pred, state, state_edge, from_edge):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Per route record, the edge before its target: ``from_edge`` when it follows at once."""
+    out = np.full(len(rec), ARRIVAL_UNKNOWN, dtype=np.int64)
+    for k in range(len(rec)):
+        r = rec[k]
+        if r >= 0:
+            p = pred[r]
+            out[k] = from_edge[k] if p < 0 else state_edge[state[p]]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def route_arrivals(fits, searched, rec, table, state_edge, from_edge):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    The edge each route of :func:`_pair_routes` drives onto its target edge from.
+
+    The route's last edge before the target, or its source edge when the target follows it
+    directly; :data:`~mapmatch.hmm.routes.ARRIVAL_UNKNOWN` where there is no route.
+    """
+    if fits:
+        return _arrivals_of(rec, table[10], table[3], state_edge, from_edge)
+    return _arrivals_of(rec, searched[7], searched[3], state_edge, from_edge)
 
 
 @njit(cache=True, nogil=True)
@@ -337,8 +366,12 @@ def transitions_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - co
     ``c_ptr`` gives each used observation's candidate rows, ``c_bear`` their road direction;
     ``step_m, dt, travel_m, slack_m`` are per step between the used observations,
     ``sigma, fix_x, fix_y, heading, speed`` per used observation (``travel_m`` and
-    ``heading`` empty when unknown). Returns the scores, the kinds and the forward routes
-    (:func:`_pair_routes`).
+    ``heading`` empty when unknown). Returns the scores, the kinds, the forward routes
+    (:func:`_pair_routes`) and ``(move score, move kind, move arrival, arrival)``: each pair's
+    best explanation that moves the car, and the edge the car arrives on ``b``'s edge from
+    with that move and with the best explanation (:data:`~mapmatch.hmm.routes.ARRIVAL_SAME`,
+    :data:`~mapmatch.hmm.routes.ARRIVAL_HELD`, or an edge), for the Viterbi pass's check of
+    holds across edges (:func:`~mapmatch.hmm.viterbi.viterbi_arrivals_kernel`).
     """
     edge_len, edge_twin = graph[6], graph[5]
     n = len(a)
@@ -398,6 +431,18 @@ def transitions_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - co
             if score > lt[k]:
                 lt[k] = score
                 kind[k] = ROUTE_UTURN
+    # the moves alone, and the edge each drives onto b's edge from: a hold across edges is a
+    # held car only where the car arrived on b's edge, which the Viterbi pass checks against
+    # the state's own arrival (elsewhere the move is what the pair scores)
+    moved = lt.copy()
+    move_arrival = route_arrivals(fits, searched, rec, table, graph[2], ea)
+    for k in range(n):
+        if kind[k] == ROUTE_SAME_EDGE:
+            move_arrival[k] = ARRIVAL_SAME
+        elif kind[k] == ROUTE_UTURN:
+            move_arrival[k] = ea[k]
+    arrival = move_arrival.copy()
+    move_kind = kind.copy()
     # holding still: b a little behind a, on its edge or across edges
     back, near = held_behind(ea, eb, oa, ob, c_x[a], c_y[a], c_x[b], c_y[b], tolerance)
     if len(near):
@@ -425,7 +470,9 @@ def transitions_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - co
         if score > lt[k]:
             lt[k] = score
             kind[k] = ROUTE_STANDSTILL
-    return lt, kind, fits, searched, rec, r_dist, r_time, r_turns
+            arrival[k] = ARRIVAL_SAME if ea[k] == eb[k] else ARRIVAL_HELD
+    moves = (moved, move_kind, move_arrival, arrival)
+    return lt, kind, fits, searched, rec, r_dist, r_time, r_turns, moves
 
 
 #: The table argument of :func:`transitions_kernel` when the network has no usable table.
@@ -439,6 +486,7 @@ _NO_TABLE = (
     np.zeros(0),
     np.zeros(0, dtype=np.int16),
     np.zeros(1, dtype=np.int64),
+    np.zeros(0, dtype=np.int32),
     np.zeros(0, dtype=np.int32),
 )
 
@@ -464,7 +512,8 @@ def route_inputs(net: RoadNetwork) -> tuple[Any, ...]:
     if table is not None and not table.weighted and table.uturn_cost_m == DEFAULT_UTURN_COST_M:
         bound = float(table.bounds_m.min(initial=np.inf))
         t = (bound, table.sources, table.ptr, table.state, table._order(), table.distance_m,
-             table.time_s, table.uturns, net.turns.copy_ptr, net.turns.copy_state)  # fmt: skip
+             table.time_s, table.uturns, net.turns.copy_ptr, net.turns.copy_state,
+             table.pred)  # fmt: skip
     else:
         t = _NO_TABLE
     inputs = graph, ws, group, DEFAULT_UTURN_COST_M, t

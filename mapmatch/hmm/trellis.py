@@ -26,7 +26,7 @@ from mapmatch.hmm.pathwalk import EPS_M
 from mapmatch.hmm.routes import pairs_kernel, search_bound
 from mapmatch.hmm.solution import Solution
 from mapmatch.hmm.transition import route_inputs, routes_found, table_pays, transitions_kernel
-from mapmatch.hmm.viterbi import _posterior_kernel, _viterbi_kernel
+from mapmatch.hmm.viterbi import _posterior_kernel, viterbi_arrivals_kernel
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -179,7 +179,7 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     else:
         travel_m, slack = np.empty(0), np.empty(0)
     heading = oheading[used] if has_heading else oheading
-    lt, kind, fits, searched, rec, r_dist, r_time, r_turns = transitions_kernel(
+    lt, kind, fits, searched, rec, r_dist, r_time, r_turns, moves = transitions_kernel(
         graph, ws, scratch, uturn_cost_m, table, edge_speed,
         edge, off, dist, cx, cy, bear, ptr, step, a, b, bounds,
         step_m, dt, osigma[used], ox[used], oy[used], travel_m, slack, heading, ospeed[used],
@@ -193,20 +193,39 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     for i in range(n):
         for r in range(ptr[i], ptr[i + 1]):
             em_pad[i, r - ptr[i]] = em[r]
+    edge_pad = np.full((n, width), -1, dtype=np.int64)
+    for i in range(n):
+        for r in range(ptr[i], ptr[i + 1]):
+            edge_pad[i, r - ptr[i]] = edge[r]
     tr_pad = np.full((max(n - 1, 0), width, width), -np.inf)
     kinds = np.full((max(n - 1, 0), width, width), -1, dtype=np.int64)
+    pair = np.full((max(n - 1, 0), width, width), -1, dtype=np.int64)
+    move_score, move_kind, move_arrival, arrival = moves
     floor = params[P_MIN_LOG_TRANSITION]
     for k in range(len(step)):
         t = step[k]
         score = lt[k]
         if cut_after[t] or score < floor:
             score = -np.inf
+        if cut_after[t] or move_score[k] < floor:
+            move_score[k] = -np.inf
         tr_pad[t, a_rank[k], b_rank[k]] = score
         kinds[t, a_rank[k], b_rank[k]] = kind[k]
+        pair[t, a_rank[k], b_rank[k]] = k
     if n:
-        states, starts, _ = _viterbi_kernel(em_pad, tr_pad)
+        states, starts, _, moved = viterbi_arrivals_kernel(
+            em_pad, tr_pad, kinds, pair, edge_pad, move_score, move_arrival, arrival
+        )
     else:
         states, starts = np.empty(0, dtype=np.int64), np.zeros(0, dtype=np.bool_)
+        moved = np.zeros((0, width), dtype=np.bool_)
+    # where the best path's hold was not on its arrival edge, the path moved: say so
+    for t in range(1, n):
+        i, j = states[t - 1], states[t]
+        if i >= 0 and j >= 0 and not starts[t] and moved[t, j]:
+            k = pair[t - 1, i, j]
+            tr_pad[t - 1, i, j] = move_score[k]
+            kinds[t - 1, i, j] = move_kind[k]
     piece_lo, piece_hi = _pieces(states, starts)
     post = _posterior_kernel(em_pad, tr_pad, piece_lo, piece_hi)
     return (

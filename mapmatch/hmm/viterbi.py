@@ -4,7 +4,9 @@ Works on padded trellises: ``log_emission[t, k]`` for candidate ``k`` of fix ``t
 for padding or a fix with no candidate) and ``log_transition[t, j, k]`` from candidate ``j``
 of fix ``t`` to candidate ``k`` of fix ``t + 1``. Where no candidate of a fix can be reached
 from the previous fix, the sequence is split there (a *break*) and the next piece starts
-afresh. The loops run compiled (numba); numpy only.
+afresh. The matcher's pass (:func:`viterbi_arrivals_kernel`) also carries, per state, the
+edge its best path arrived by, so a fix held behind across a junction stands only on the road
+the car came by. The loops run compiled (numba); numpy only.
 """
 
 from __future__ import annotations
@@ -15,10 +17,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from mapmatch.hmm.routes import ARRIVAL_SAME, ARRIVAL_UNKNOWN, ROUTE_SAME_EDGE, ROUTE_STANDSTILL
+
 if TYPE_CHECKING:
     from mapmatch.types import FloatArray, IntArray
 
-__all__ = ["ViterbiResult", "posteriors", "viterbi"]
+__all__ = ["ViterbiResult", "posteriors", "viterbi", "viterbi_arrivals_kernel"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -47,32 +51,9 @@ class ViterbiResult:
 
 
 @njit(cache=True, nogil=True)
-def _viterbi_kernel(em, tr):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    n_steps, width = em.shape
-    delta = np.full((n_steps, width), -np.inf)
-    back = np.full((n_steps, width), -1, dtype=np.int64)
-    for k in range(width):
-        delta[0, k] = em[0, k]
-    for t in range(1, n_steps):
-        alive = False
-        for k in range(width):
-            if em[t, k] == -np.inf:
-                continue
-            best = -np.inf
-            arg = -1
-            for j in range(width):
-                value = delta[t - 1, j] + tr[t - 1, j, k]
-                if value > best:
-                    best = value
-                    arg = j
-            if arg >= 0:
-                delta[t, k] = best + em[t, k]
-                back[t, k] = arg
-                alive = True
-        if not alive:
-            for k in range(width):
-                delta[t, k] = em[t, k]
-                back[t, k] = -1
+def _backtrack(delta, back):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """The best states from the scores and back pointers, each piece from its last fix."""
+    n_steps, width = delta.shape
     states = np.full(n_steps, -1, dtype=np.int64)
     starts = np.zeros(n_steps, dtype=np.bool_)
     total = 0.0
@@ -97,6 +78,82 @@ def _viterbi_kernel(em, tr):  # type: ignore[no-untyped-def]  # pragma: no cover
         starts[t] = True
         t -= 1
     return states, starts, total
+
+
+@njit(cache=True, nogil=True)
+def viterbi_arrivals_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    em, tr, kinds, pair, cand_edge, move_score, move_arrival, arrival_of
+):
+    """
+    Viterbi over a trellis whose holds across edges depend on how the car got there.
+
+    A transition that holds the car still with the next fix on another edge
+    (:data:`~mapmatch.hmm.routes.ROUTE_STANDSTILL`, ``b`` behind ``a`` across a junction)
+    says the car is still where it arrived from: that is only so on the edge it arrived
+    on. Each state carries the edge its best path drove onto its edge from (``arrival``,
+    an edge or :data:`~mapmatch.hmm.routes.ARRIVAL_UNKNOWN` at a piece's start); where a
+    hold across edges leads to an edge other than that, the pair scores its move instead
+    (``move_score``). Otherwise a state on the
+    edge into a junction the car never drove hides a turn round there: the next move is
+    scored from that edge, as a straight route, and the U-turn is never paid for.
+
+    ``pair`` maps each padded transition to its pair (-1: none) in ``move_score``,
+    ``move_arrival`` and ``arrival_of`` (the arrival when the pair's best explanation is
+    taken; :data:`~mapmatch.hmm.routes.ARRIVAL_SAME`: the state before's own);
+    ``cand_edge`` is each padded candidate's edge. Returns the states, the piece starts, the
+    total and, per padded state, whether its best path's last transition was the move.
+    """
+    n_steps, width = em.shape
+    delta = np.full((n_steps, width), -np.inf)
+    back = np.full((n_steps, width), -1, dtype=np.int64)
+    arrival = np.full((n_steps, width), ARRIVAL_UNKNOWN, dtype=np.int64)
+    moved = np.zeros((n_steps, width), dtype=np.bool_)
+    for k in range(width):
+        delta[0, k] = em[0, k]
+    for t in range(1, n_steps):
+        alive = False
+        for k in range(width):
+            if em[t, k] == -np.inf:
+                continue
+            best = -np.inf
+            arg = -1
+            came = ARRIVAL_UNKNOWN
+            fell = False
+            for j in range(width):
+                p = pair[t - 1, j, k]
+                if p < 0 or delta[t - 1, j] == -np.inf:
+                    continue
+                score = tr[t - 1, j, k]
+                here = arrival_of[p]
+                move = False
+                across = cand_edge[t, k] != cand_edge[t - 1, j]
+                if kinds[t - 1, j, k] == ROUTE_STANDSTILL and across:
+                    before = arrival[t - 1, j]
+                    if before != ARRIVAL_UNKNOWN and before != cand_edge[t, k]:
+                        score = move_score[p]
+                        here = move_arrival[p]
+                        move = True
+                if here == ARRIVAL_SAME:
+                    here = arrival[t - 1, j]
+                value = delta[t - 1, j] + score
+                if value > best:
+                    best = value
+                    arg = j
+                    came = here
+                    fell = move
+            if arg >= 0:
+                delta[t, k] = best + em[t, k]
+                back[t, k] = arg
+                arrival[t, k] = came
+                moved[t, k] = fell
+                alive = True
+        if not alive:
+            for k in range(width):
+                delta[t, k] = em[t, k]
+                back[t, k] = -1
+                arrival[t, k] = ARRIVAL_UNKNOWN
+    states, starts, total = _backtrack(delta, back)
+    return states, starts, total, moved
 
 
 @njit(cache=True, nogil=True)
@@ -177,7 +234,13 @@ def viterbi(log_emission: FloatArray, log_transition: FloatArray) -> ViterbiResu
     tr = np.ascontiguousarray(log_transition, dtype=np.float64)
     if em.shape[0] == 0:
         return ViterbiResult(np.empty(0, dtype=np.int64), [], 0.0)
-    states, starts, total = _viterbi_kernel(em, tr)
+    # no holds: every transition a move along one edge
+    kinds = np.full(tr.shape, ROUTE_SAME_EDGE, dtype=np.int64)
+    pair = np.arange(tr.size, dtype=np.int64).reshape(tr.shape)
+    same = np.full(tr.size, ARRIVAL_SAME, dtype=np.int64)
+    states, starts, total, _ = viterbi_arrivals_kernel(
+        em, tr, kinds, pair, np.zeros(em.shape, dtype=np.int64), tr.ravel(), same, same
+    )
     pieces: list[tuple[int, int]] = []
     matched = states >= 0
     begin = np.flatnonzero(starts & matched)

@@ -8,7 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mapmatch.hmm.viterbi import posteriors, viterbi
+from mapmatch.hmm.routes import ARRIVAL_HELD, ROUTE_STANDSTILL, ROUTE_VIA_GRAPH
+from mapmatch.hmm.viterbi import posteriors, viterbi, viterbi_arrivals_kernel
 
 
 @dataclass
@@ -97,3 +98,36 @@ def test_padding_states_are_never_chosen() -> None:
     tr = np.zeros((2, 2, 2))
     best = viterbi(em, tr)
     assert best.states.tolist() == [0, 1, 0]
+
+
+def _held_across_trellis(arrived_from: int) -> tuple[np.ndarray, ...]:
+    """
+    Three fixes: one state on edge 10, one on edge 20 (reached from ``arrived_from``), then
+    a hold across edges back onto edge 30 (score -1, its move -5) or a move onto edge 40 (-3).
+    """
+    em = np.array([[0.0, -np.inf], [0.0, -np.inf], [0.0, 0.0]])
+    tr = np.full((2, 2, 2), -np.inf)
+    kinds = np.full((2, 2, 2), -1, dtype=np.int64)
+    pair = np.full((2, 2, 2), -1, dtype=np.int64)
+    tr[0, 0, 0], kinds[0, 0, 0], pair[0, 0, 0] = -1.0, ROUTE_VIA_GRAPH, 0
+    tr[1, 0, 0], kinds[1, 0, 0], pair[1, 0, 0] = -1.0, ROUTE_STANDSTILL, 1
+    tr[1, 0, 1], kinds[1, 0, 1], pair[1, 0, 1] = -3.0, ROUTE_VIA_GRAPH, 2
+    cand_edge = np.array([[10, -1], [20, -1], [30, 40]], dtype=np.int64)
+    move_score = np.array([-1.0, -5.0, -3.0])
+    move_arrival = np.array([arrived_from, 20, 20], dtype=np.int64)
+    arrival_of = np.array([arrived_from, ARRIVAL_HELD, 20], dtype=np.int64)
+    return em, tr, kinds, pair, cand_edge, move_score, move_arrival, arrival_of
+
+
+def test_a_hold_across_edges_stands_only_on_the_edge_the_car_arrived_by() -> None:
+    # arrived on edge 20 from edge 30: the fix behind it on edge 30 is the car held still
+    states, _, total, moved = viterbi_arrivals_kernel(*_held_across_trellis(arrived_from=30))
+    assert states.tolist() == [0, 0, 0]
+    assert total == pytest.approx(-2.0)
+    assert not moved.any()
+    # arrived from edge 15: edge 30 is a road it never drove, and holding there would hide a
+    # turn round at the junction; the pair scores its move (-5), and the other road wins
+    states, _, total, moved = viterbi_arrivals_kernel(*_held_across_trellis(arrived_from=15))
+    assert states.tolist() == [0, 0, 1]
+    assert total == pytest.approx(-4.0)
+    assert moved[2].tolist() == [True, False]
