@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
-from itertools import pairwise
+from itertools import accumulate
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
@@ -41,7 +41,6 @@ from mapmatch._jsontext import (
     Strings,
     Table,
     Tuple,
-    Values,
 )
 from mapmatch._timing import PathPositions, edge_times, path_positions
 
@@ -152,9 +151,10 @@ class EdgeTable:
     def mean_speed_kph(self) -> FloatArray:
         """Driven metres over seconds on each edge, km/h; NaN where no time passed."""
         duration = self.duration_s
-        with np.errstate(invalid="ignore", divide="ignore"):
-            speed = 3.6 * self.driven_m / duration
-        return np.asarray(np.where(duration > 0, speed, np.nan), dtype=np.float64)
+        # divided only where time passed (np.errstate costs more than the division)
+        speed: FloatArray = np.full(len(duration), np.nan)
+        np.divide(3.6 * self.driven_m, duration, out=speed, where=duration > 0)
+        return speed
 
 
 def edge_table(result: MatchResult, positions: PathPositions | None = None) -> EdgeTable:
@@ -249,40 +249,37 @@ def _coordinates(degrees: FloatArray) -> Floats:
     return Floats(degrees, decimals=COORD_DIGITS, rounding="numpy")
 
 
-def _edge_json(edges: EdgeTable, part: slice) -> Table:
-    """The ``edges`` of a segment Feature: rows ``part`` of the result's edge table."""
-    names = [name or None for name in edges.name[part]]
-
-    def metres(values: FloatArray) -> Floats:
-        return _rounded(values[part], _METRES)
-
+def _edge_json(edges: EdgeTable) -> Table:
+    """The ``edges`` of the segment Features: one row per row of the result's edge table."""
+    names = [name or None for name in edges.name]
     return Table(
-        part.stop - part.start,
+        len(edges),
         [
-            ("u", Ints(edges.u[part])),
-            ("v", Ints(edges.v[part])),
-            ("key", Ints(edges.key[part])),
-            ("osm_way_ids", Tuple((Ints(edges.way_id[part]),))),
-            ("length_m", metres(edges.length_m)),
-            ("start_offset_m", metres(edges.start_offset_m)),
-            ("end_offset_m", metres(edges.end_offset_m)),
+            ("u", Ints(edges.u)),
+            ("v", Ints(edges.v)),
+            ("key", Ints(edges.key)),
+            ("osm_way_ids", Tuple((Ints(edges.way_id),))),
+            ("length_m", _rounded(edges.length_m, _METRES)),
+            ("start_offset_m", _rounded(edges.start_offset_m, _METRES)),
+            ("end_offset_m", _rounded(edges.end_offset_m, _METRES)),
             ("name", Strings(names)),
-            ("road_class", Strings(edges.road_class[part])),
-            ("speed_limit_kph", _rounded(edges.speed_limit_kph[part], 1)),
-            ("entry_time", _rounded(edges.entry_time_s[part], _SECONDS)),
-            ("exit_time", _rounded(edges.exit_time_s[part], _SECONDS)),
-            ("duration_s", _rounded(edges.duration_s[part], _SECONDS)),
-            ("mean_speed_kph", _rounded(edges.mean_speed_kph[part], 2)),
+            ("road_class", Strings(edges.road_class)),
+            ("speed_limit_kph", _rounded(edges.speed_limit_kph, 1)),
+            ("entry_time", _rounded(edges.entry_time_s, _SECONDS)),
+            ("exit_time", _rounded(edges.exit_time_s, _SECONDS)),
+            ("duration_s", _rounded(edges.duration_s, _SECONDS)),
+            ("mean_speed_kph", _rounded(edges.mean_speed_kph, 2)),
         ],
-        schema="geojson-edges",
     )
 
 
-def _path(seg: Segment) -> Values:
-    lon, lat = seg.lon, seg.lat
-    if len(lon) == 1:  # a LineString needs two positions
-        lon, lat = np.repeat(lon, 2), np.repeat(lat, 2)
-    return Values(Tuple((_coordinates(lon), _coordinates(lat))), len(lon))
+def _paths(segs: list[Segment]) -> Items:
+    """Each segment's LineString: its path's vertices (a lone vertex twice: a line needs two)."""
+    lons = [s.lon if len(s.lon) != 1 else np.repeat(s.lon, 2) for s in segs]
+    lats = [s.lat if len(s.lat) != 1 else np.repeat(s.lat, 2) for s in segs]
+    bounds = np.fromiter(accumulate(map(len, lons), initial=0), np.int64, len(segs) + 1)
+    lon, lat = (np.concatenate(x) if x else np.zeros(0) for x in (lons, lats))
+    return Items(Tuple((_coordinates(lon), _coordinates(lat))), bounds, geometry="LineString")
 
 
 def _segment_table(result: MatchResult, edges: EdgeTable) -> Table:
@@ -290,8 +287,7 @@ def _segment_table(result: MatchResult, edges: EdgeTable) -> Table:
     segs = result.segments
     count = len(segs)
     lengths = np.array([s.length_m for s in segs], dtype=np.float64)
-    bounds = np.concatenate(([0], np.cumsum([len(s.edge) for s in segs], dtype=np.int64)))
-    parts = [slice(a, b) for a, b in pairwise(bounds.tolist())]
+    bounds = np.fromiter(accumulate((len(s.edge) for s in segs), initial=0), np.int64, count + 1)
     start, end = _segment_times(edges, bounds)
     properties = Table(
         count,
@@ -308,7 +304,7 @@ def _segment_table(result: MatchResult, edges: EdgeTable) -> Table:
                 ),
             ),
             ("length_m", _rounded(lengths, _METRES)),
-            ("edges", Items([_edge_json(edges, part) for part in parts])),
+            ("edges", Items(_edge_json(edges), bounds)),
             ("start_time", _rounded(start, _SECONDS)),
             ("end_time", _rounded(end, _SECONDS)),
         ],
@@ -317,7 +313,7 @@ def _segment_table(result: MatchResult, edges: EdgeTable) -> Table:
         count,
         [
             ("type", Const("Feature")),
-            ("geometry", Items([_path(s) for s in segs], geometry="LineString")),
+            ("geometry", _paths(segs)),
             ("properties", Nested(properties)),
         ],
         schema="geojson-segment",
