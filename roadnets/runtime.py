@@ -88,9 +88,10 @@ class KernelWarmup:
 
 def _dispatchers() -> list[object]:
     """The kernels called from Python (the others are compiled into them)."""
-    from roadnets import route_search, routing, spatial_kernels
+    from roadnets import names_kernel, route_search, routing, spatial_kernels
 
     return [
+        names_kernel.gather_names,
         routing._bounded_dijkstra_many,
         route_search.search_many,
         route_search.route_pairs_kernel,
@@ -144,8 +145,8 @@ def warm_kernels() -> KernelWarmup:
     Compile (or load from numba's cache) every roadnets kernel, before it is needed.
 
     Runs the node router, the edge router (pairs and tables, lengths and caller costs), the
-    table look-ups, the projection both ways and the R-tree query once each on a 3 x 3 block
-    network built in memory.
+    table look-ups, the projection both ways, the R-tree query and the street names' gather
+    once each on a 3 x 3 block network built in memory.
     Cheap when the kernels are already in numba's on-disk cache; seconds on a fresh install.
 
     Returns
@@ -174,6 +175,7 @@ def warm_kernels() -> KernelWarmup:
     net.unproject(x, y)
     net.nearby_edges(x, y, 50.0)
     net.path_polyline(edges[:2], np.zeros(2), a.edge_length_m[:2])
+    net.way_names.names_of(a.edge_way_id[:2])
     net.precompute_routes(1000.0)
     net.edge_routes(edges, edges[::-1], 500.0)  # answered from the table
     misses_now, hits_now = _counts()
