@@ -11,8 +11,9 @@ columns, and renders it as JSON text (:meth:`Table.text`) or as dicts
 
 The text of a whole table is written by one compiled call (:func:`_write_rows`), from a
 small program made once per set of columns (literals, numbers, nested objects and arrays
-inlined) and the columns' arrays, so no dict, no JSON encoder and no Python object is
-touched per value. Numbers come out as ``json.dumps`` writes them (``repr``); values that
+inlined, the arrays of items of each row too: :class:`Items`) and the columns' arrays, so
+no dict, no JSON encoder and no Python object is touched per value; several tables' rows
+one after another are one call as well (:func:`chained_ascii`: a document's features). Numbers come out as ``json.dumps`` writes them (``repr``); values that
 are not finite, and rows outside a column's ``valid`` mask, are ``null``.
 
 Examples
@@ -55,6 +56,7 @@ __all__ = [
     "Strings",
     "Table",
     "Tuple",
+    "chained_ascii",
     "py_round",
 ]
 
@@ -300,7 +302,7 @@ def _output_size(rows, sep, ops, lit_at, floats_at, ints, ints_at, text_at, text
             outer[depth] = extent
             depth += 1
             extent = ints[at + extent]
-            size += extent  # the commas between the items
+            size += extent + outer[depth - 1]  # the commas between the items, and before
             continue
         if code == 7:
             depth -= 1
@@ -340,8 +342,9 @@ def _write_rows(  # type: ignore[no-untyped-def]  # pragma: no cover
     ``b``) / ``true`` or ``false``; ``_TEXT``: the row's bytes of text column ``a``;
     ``_GROUP``: ``null`` instead of the next ``b`` steps outside mask ``a``; ``_EACH``: the
     next ``b`` steps (up to and with their ``_NEXT``) once for each row of a part from
-    ``bounds[row]`` to ``bounds[row + 1]`` (int column ``a``), separated by commas. Rows are
-    separated by the byte ``sep`` (none if negative).
+    ``bounds[row]`` to ``bounds[row + 1]`` (int column ``a``), separated by commas (with
+    ``c`` 1, one before the first too if the row has text already). Rows are separated by
+    the byte ``sep`` (none if negative).
 
     Returns the text, where each row starts (and the end), and ``(position, step, row,
     top row)`` of each number left for ``repr`` (written as nothing; ``row`` of its level).
@@ -419,6 +422,9 @@ def _write_rows(  # type: ignore[no-untyped-def]  # pragma: no cover
             elif code == 6:
                 lo = ints[ints_at[a] + row]
                 hi = ints[ints_at[a] + row + 1]
+                if lo < hi and ops[k, 3] and at > row_at[r]:  # joined to what came before
+                    out[at] = 44  # ,
+                    at += 1
                 if lo < hi:
                     saved[depth, 0] = row
                     saved[depth, 1] = hi
@@ -552,13 +558,17 @@ class _Writer:
             self._flush()
             self.ops[group] = (_GROUP, self.ops[group][1], len(self.ops) - group - 1, 0)
 
-    def each(self, bounds: IntArray, rows: int) -> tuple[int, int]:
+    def each(
+        self, bounds: IntArray, rows: int, member: str = "bounds", *, join: bool = False
+    ) -> tuple[int, int]:
         """
         Open the items of an array: rows ``bounds[row]:bounds[row + 1]`` of a part of ``rows``.
 
-        What is written until :meth:`next` is written once per item, commas between them.
+        What is written until :meth:`next` is written once per item, commas between them
+        (and with ``join`` one before the first if the row has text already). ``member``
+        names where the bounds are found.
         """
-        self._step(_EACH, self._add_ints(bounds, "bounds"))
+        self._step(_EACH, self._add_ints(bounds, member), -1, int(join))
         outer, self.rows = self.rows, rows
         return len(self.ops) - 1, outer
 
@@ -566,7 +576,12 @@ class _Writer:
         """Close the items :meth:`each` opened."""
         step, self.rows = opened
         self._step(_NEXT, 0)
-        self.ops[step] = (_EACH, self.ops[step][1], len(self.ops) - step - 1, 0)
+        code, a, _, c = self.ops[step]
+        self.ops[step] = (code, a, len(self.ops) - step - 1, c)
+
+    def table(self, table: Table, index: int) -> None:
+        """Write table ``index`` of a :class:`_Chain`."""
+        table.write(self)
 
     def run(self, sep: int) -> tuple[bytes, IntArray, list[tuple[int, int, str]]]:
         """
@@ -655,7 +670,7 @@ class _Planner(_Writer):
 
     def __init__(self, rows: int) -> None:
         super().__init__(rows)
-        self._path: list[str] = []  # the expression of the column being written, and its parents
+        self._path = ["t"]  # the expression of the column being written, and its parents
         self._bases = [("t.columns", "columns")]  # how the columns at each level are reached
         self._next = [0]  # the index of the next column at each level
         self._levels = ["t.rows"]  # the rows of the level being written
@@ -682,6 +697,16 @@ class _Planner(_Writer):
         self._bases.pop()
         self._next.pop()
         self._path.pop()
+
+    def table(self, table: Table, index: int) -> None:
+        """Write table ``index`` of a :class:`_Chain`, its columns reached through it."""
+        self._bases.append((f"t.tables[{index}].columns", "columns"))
+        self._next.append(0)
+        self._levels.append(f"t.tables[{index}].rows")
+        super().table(table, index)
+        self._levels.pop()
+        self._next.pop()
+        self._bases.pop()
 
     def _add_floats(self, values: FloatArray) -> int:
         self.sources["floats"].append(f"{self._path[-1]}.values")
@@ -736,7 +761,7 @@ _PLANS: dict[str, _Plan] = {}
 
 
 def _planned(
-    table: Table, schema: str, sep: int
+    table: Table | _Chain, schema: str, sep: int
 ) -> tuple[bytes, IntArray, list[tuple[int, int, str]]]:
     """:meth:`_Writer.run` of ``table`` by its schema's plan (made on the first table)."""
     plan = _PLANS.get(schema)
@@ -1020,8 +1045,8 @@ class Table:
     """
     Rows of JSON objects with the same members: ``{name: value, ...}`` per row.
 
-    The text is written by one compiled call for the whole table (nested objects and
-    arrays of the same rows inlined), from a program made once per set of columns.
+    The text is written by one compiled call for the whole table (nested objects, arrays
+    and arrays of items inlined), from a program made once per set of columns.
 
     Parameters
     ----------
@@ -1073,6 +1098,56 @@ class Table:
         names = [name for name, _ in self.columns]
         values = [column.objects(self.rows) for _, column in self.columns]
         return [dict(zip(names, row, strict=True)) for row in zip(*values, strict=True)]
+
+
+class _Chain:
+    """Several tables' rows one after another, as the one row of a program."""
+
+    __slots__ = ("bounds", "tables")
+
+    rows = 1
+
+    def __init__(self, tables: Sequence[Table]) -> None:
+        self.tables = tables
+        self.bounds = [np.array([0, t.rows], dtype=np.int64) for t in tables]
+
+    def write(self, writer: _Writer) -> None:
+        """Write each table's rows, commas between all of them."""
+        for i, table in enumerate(self.tables):
+            opened = writer.each(self.bounds[i], table.rows, f"bounds[{i}]", join=True)
+            writer.table(table, i)
+            writer.next(opened)
+
+
+def chained_ascii(tables: Sequence[Table], schema: str | None = None) -> bytes:
+    """
+    The rows' objects of several tables one after another, joined by commas, ASCII.
+
+    ``b",".join(t.ascii() for t in tables if t.rows)``, written by one compiled call.
+
+    Parameters
+    ----------
+    tables
+        The tables, in order.
+    schema
+        A name for chains made by the same code every time (see :class:`Table`): the walk
+        over the columns of the first chain of a schema is kept for the later ones.
+
+    Examples
+    --------
+    >>> segments = Table(0, [("kind", Const("segment"))])
+    >>> points = Table(2, [("kind", Const("point")), ("n", Ints(np.array([7, 8])))])
+    >>> chained_ascii([segments, points, points])
+    b'{"kind":"point","n":7},{"kind":"point","n":8},{"kind":"point","n":7},{"kind":"point","n":8}'
+    """
+    chain = _Chain(tables)
+    if schema is not None:
+        text, _, fixes = _planned(chain, schema, -1)
+    else:
+        writer = _Writer(1)
+        chain.write(writer)
+        text, _, fixes = writer.run(-1)
+    return _spliced(text, fixes, 0)
 
 
 #: How :meth:`_Writer.column` writes each kind of column this module knows (in the program;

@@ -41,6 +41,7 @@ from mapmatch._jsontext import (
     Strings,
     Table,
     Tuple,
+    chained_ascii,
 )
 from mapmatch._timing import PathPositions, edge_times, path_positions
 
@@ -363,8 +364,8 @@ def geojson_bytes(result: MatchResult) -> bytes:
         points).
     """
     head = json.dumps(_head(result), allow_nan=False, separators=(",", ":"))
-    parts = [t.ascii() for t in _feature_tables(result) if t.rows]
-    return b"".join((head[:-1].encode("ascii"), b',"features":[', b",".join(parts), b"]}"))
+    features = chained_ascii(_feature_tables(result), schema="geojson-features")
+    return b"".join((head[:-1].encode("ascii"), b',"features":[', features, b"]}"))
 
 
 def geojson_dict(result: MatchResult) -> dict[str, Any]:

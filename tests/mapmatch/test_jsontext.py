@@ -10,14 +10,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mapmatch._jsontext import Const, Floats, Ints, Items, Nested, Strings, Table, Tuple
+from mapmatch import _jsontext as jt
 
 #: Values whose text is easy to get wrong: signs of zero, exponents, halves, not finite.
 _AWKWARD = [0.0, -0.0, 1e-05, 5e-05, 1e-4, 2.675, 1.0005, 1e15, 1e16, -1e22, 0.1]
 #: (Below 1e300: numpy's rounding of a value near the largest float overflows, and warns.)
-_FLOATS = st.one_of(
-    st.sampled_from([*_AWKWARD, np.nan, np.inf, -np.inf]), st.floats(-1e300, 1e300)
-)
+_FLOATS = st.one_of(st.sampled_from([*_AWKWARD, np.nan, np.inf, -np.inf]), st.floats(-1e300, 1e300))
 _INTS = st.integers(-(2**63), 2**63 - 1)
 _NAMES = st.one_of(st.none(), st.sampled_from(["", 'a "quote"', "back\\slash", "Straße", "\x00"]))
 
@@ -49,27 +47,29 @@ def _segments(draw: st.DrawFn) -> tuple[Any, ...]:
     return bounds, inner, outer, decimals, rounding
 
 
-def _table(case: tuple[Any, ...], schema: str | None) -> Table:
+def _table(case: tuple[Any, ...], schema: str | None) -> jt.Table:
     bounds, inner, outer, decimals, rounding = case
     n = int(bounds[-1])
-    edges = Table(
+    edges = jt.Table(
         n,
         [
-            ("x", Floats(inner["x"], decimals=decimals, rounding=rounding)),
-            ("u", Ints(inner["u"], inner["valid"])),
-            ("name", Strings(inner["name"])),
-            ("ids", Tuple((Ints(inner["u"]),), inner["valid"])),
+            ("x", jt.Floats(inner["x"], decimals=decimals, rounding=rounding)),
+            ("u", jt.Ints(inner["u"], inner["valid"])),
+            ("name", jt.Strings(inner["name"])),
+            ("ids", jt.Tuple((jt.Ints(inner["u"]),), inner["valid"])),
         ],
     )
-    line = Tuple((Floats(inner["lon"], rounding="numpy"), Floats(inner["x"], rounding="numpy")))
+    line = jt.Tuple(
+        (jt.Floats(inner["lon"], rounding="numpy"), jt.Floats(inner["x"], rounding="numpy"))
+    )
     rows = len(bounds) - 1
-    properties = Table(rows, [("kind", Const("segment")), ("edges", Items(edges, bounds))])
-    return Table(
+    properties = jt.Table(rows, [("kind", jt.Const("segment")), ("edges", jt.Items(edges, bounds))])
+    return jt.Table(
         rows,
         [
-            ("geometry", Items(line, bounds, geometry="LineString")),
-            ("properties", Nested(properties)),
-            ("t", Floats(outer, decimals=3, rounding="python")),
+            ("geometry", jt.Items(line, bounds, geometry="LineString")),
+            ("properties", jt.Nested(properties)),
+            ("t", jt.Floats(outer, decimals=3, rounding="python")),
         ],
         schema=None if schema is None else f"{schema}-{decimals}-{rounding}",
     )
@@ -81,13 +81,13 @@ def test_arrays_of_items_are_written_as_json_dumps_writes_them(case: tuple[Any, 
     walked = _table(case, None)
     assert f"[{walked.text()}]" == _dumped(walked.objects())
     assert _table(case, "test-items").text() == walked.text()  # by the schema's plan
-    cells = Nested(walked).cells(walked.rows)
+    cells = jt.Nested(walked).cells(walked.rows)
     assert cells == [_dumped(row) for row in walked.objects()]
 
 
 def test_an_empty_array_and_a_lone_item_are_written_as_such() -> None:
     bounds = np.array([0, 0, 1, 1], dtype=np.int64)
-    table = Table(3, [("v", Items(Floats(np.array([-0.0])), bounds))])
+    table = jt.Table(3, [("v", jt.Items(jt.Floats(np.array([-0.0])), bounds))])
     assert table.text() == '{"v":[]},{"v":[-0.0]},{"v":[]}'
 
 
@@ -97,11 +97,22 @@ def test_an_empty_array_and_a_lone_item_are_written_as_such() -> None:
     ids=["decreasing", "not-from-0", "short-of-the-part", "past-the-part", "one-too-many"],
 )
 def test_bounds_that_do_not_split_the_part_are_refused(bounds: list[int], size: int) -> None:
-    items = Items(Floats(np.arange(size, dtype=np.float64)), np.array(bounds, dtype=np.int64))
-    with pytest.raises(ValueError, match="bounds|length"):
-        Table(2, [("v", items)]).text()
+    items = jt.Items(jt.Floats(np.arange(size, dtype=np.float64)), np.array(bounds, dtype=np.int64))
+    with pytest.raises(ValueError, match=r"bounds|length"):
+        jt.Table(2, [("v", items)]).text()
 
 
 def test_a_column_of_the_wrong_length_is_refused() -> None:
     with pytest.raises(ValueError, match="length"):
-        Table(3, [("x", Floats(np.zeros(2)))]).text()
+        jt.Table(3, [("x", jt.Floats(np.zeros(2)))]).text()
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(_segments(), max_size=3))
+def test_a_chain_of_tables_is_their_rows_joined(cases: list[tuple[Any, ...]]) -> None:
+    tables = [_table(case, None) for case in cases]
+    expected = b",".join(t.ascii() for t in tables if t.rows)  # empty tables add no comma
+    assert jt.chained_ascii(tables) == expected
+    schema = "test-chain-" + "-".join(f"{case[3]}{case[4]}" for case in cases)
+    assert jt.chained_ascii(tables, schema) == expected  # by the plan: the same
+    assert jt.chained_ascii(tables, schema) == expected
