@@ -13,8 +13,9 @@ The text of a whole table is written by one compiled call (:func:`_write_rows`),
 small program made once per set of columns (literals, numbers, nested objects and arrays
 inlined, the arrays of items of each row too: :class:`Items`) and the columns' arrays, so
 no dict, no JSON encoder and no Python object is touched per value; several tables' rows
-one after another are one call as well (:func:`chained_ascii`: a document's features). Numbers come out as ``json.dumps`` writes them (``repr``); values that
-are not finite, and rows outside a column's ``valid`` mask, are ``null``.
+one after another are one call as well (:func:`chained_ascii`: a document's features).
+Numbers come out as ``json.dumps`` writes them (``repr``); values that are not finite, and
+rows outside a column's ``valid`` mask, are ``null``.
 
 Examples
 --------
@@ -153,7 +154,7 @@ _ROUNDING = {"none": 0, "numpy": 1, "python": 2}
 _LIT, _FLOAT, _INT, _BOOL, _TEXT, _GROUP, _EACH, _NEXT = 0, 1, 2, 3, 4, 5, 6, 7
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _put_null(out, at):  # type: ignore[no-untyped-def]  # pragma: no cover
     out[at] = 110  # n
     out[at + 1] = 117  # u
@@ -166,7 +167,7 @@ def _put_null(out, at):  # type: ignore[no-untyped-def]  # pragma: no cover
 _PAIRS = np.frombuffer("".join(f"{i:02d}" for i in range(100)).encode("ascii"), dtype=np.uint8)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _width(k):  # type: ignore[no-untyped-def]  # pragma: no cover
     """How many decimal digits the unsigned ``k`` has (at least one)."""
     size = 1
@@ -178,7 +179,7 @@ def _width(k):  # type: ignore[no-untyped-def]  # pragma: no cover
     return size
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _put_digits(out, end, k, width):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
     Write the last ``width`` decimal digits of the unsigned ``k`` (zero-padded) before ``end``.
@@ -201,7 +202,7 @@ def _put_digits(out, end, k, width):  # type: ignore[no-untyped-def]  # pragma: 
     return k
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _put_int(out, at, k):  # type: ignore[no-untyped-def]  # pragma: no cover
     """The decimal digits of the int64 ``k`` at ``out[at:]``; returns the end."""
     if k < 0:
@@ -215,7 +216,7 @@ def _put_int(out, at, k):  # type: ignore[no-untyped-def]  # pragma: no cover
     return end
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _put_float(out, at, v, digits, rounding, pow10):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
     Write ``repr`` of the finite ``v`` (rounded first) at ``out[at:]``; return the end.

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import json
 import pickle
@@ -83,6 +84,22 @@ def test_text_and_dict_are_one_document(results: list[mapmatch.MatchResult]) -> 
         doc = result.to_geojson()
         assert json.loads(text) == doc
         assert json.dumps(doc, allow_nan=False, separators=(",", ":")).encode() == text
+
+
+def test_a_result_without_segments_writes_its_points_alone(
+    results: list[mapmatch.MatchResult],
+) -> None:
+    result = results[0]
+    n = len(result.points.time_s)
+    lost = dataclasses.replace(
+        result.points, matched=np.zeros(n, dtype=bool), segment=np.full(n, -1)
+    )
+    empty = dataclasses.replace(result, segments=[], points=lost)
+    text = export.geojson_bytes(empty)
+    assert json.dumps(empty.to_geojson(), allow_nan=False, separators=(",", ":")).encode() == text
+    kinds = [f["properties"]["kind"] for f in json.loads(text)["features"]]
+    assert kinds == ["point"] * n
+    assert len(export.edge_table(empty)) == 0
 
 
 def test_a_pickled_result_writes_the_same_document(results: list[mapmatch.MatchResult]) -> None:
