@@ -23,7 +23,7 @@ from mapmatch.hmm.params import (
     model_params,
 )
 from mapmatch.hmm.pathwalk import EPS_M
-from mapmatch.hmm.routes import pairs_kernel, search_bound
+from mapmatch.hmm.routes import ROUTE_STANDSTILL, pairs_kernel, search_bound
 from mapmatch.hmm.solution import Solution
 from mapmatch.hmm.transition import route_inputs, routes_found, table_pays, transitions_kernel
 from mapmatch.hmm.viterbi import _posterior_kernel, viterbi_arrivals_kernel
@@ -199,7 +199,7 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
             edge_pad[i, r - ptr[i]] = edge[r]
     tr_pad = np.full((max(n - 1, 0), width, width), -np.inf)
     kinds = np.full((max(n - 1, 0), width, width), -1, dtype=np.int64)
-    pair = np.full((max(n - 1, 0), width, width), -1, dtype=np.int64)
+    pair = np.full((max(n - 1, 0), width, width), -1, dtype=np.int32)
     move_score, move_kind, move_arrival, arrival = moves
     floor = params[P_MIN_LOG_TRANSITION]
     for k in range(len(step)):
@@ -211,10 +211,11 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
             move_score[k] = -np.inf
         tr_pad[t, a_rank[k], b_rank[k]] = score
         kinds[t, a_rank[k], b_rank[k]] = kind[k]
-        pair[t, a_rank[k], b_rank[k]] = k
+        across = kind[k] == ROUTE_STANDSTILL and edge[a[k]] != edge[b[k]]
+        pair[t, a_rank[k], b_rank[k]] = -2 - k if across else k
     if n:
         states, starts, _, moved = viterbi_arrivals_kernel(
-            em_pad, tr_pad, kinds, pair, edge_pad, move_score, move_arrival, arrival
+            em_pad, tr_pad, pair, edge_pad, move_score, move_arrival, arrival
         )
     else:
         states, starts = np.empty(0, dtype=np.int64), np.zeros(0, dtype=np.bool_)
@@ -223,7 +224,7 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     for t in range(1, n):
         i, j = states[t - 1], states[t]
         if i >= 0 and j >= 0 and not starts[t] and moved[t, j]:
-            k = pair[t - 1, i, j]
+            k = -2 - pair[t - 1, i, j]
             tr_pad[t - 1, i, j] = move_score[k]
             kinds[t - 1, i, j] = move_kind[k]
     piece_lo, piece_hi = _pieces(states, starts)

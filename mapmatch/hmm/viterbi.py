@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from mapmatch.hmm.routes import ARRIVAL_SAME, ARRIVAL_UNKNOWN, ROUTE_SAME_EDGE, ROUTE_STANDSTILL
+from mapmatch.hmm.routes import ARRIVAL_SAME, ARRIVAL_UNKNOWN
 
 if TYPE_CHECKING:
     from mapmatch.types import FloatArray, IntArray
@@ -80,9 +80,15 @@ def _backtrack(delta, back):  # type: ignore[no-untyped-def]  # pragma: no cover
     return states, starts, total
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _refused(code, before, edge):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """Whether a transition (its ``pair`` code) holds across edges onto one not arrived by."""
+    return code < -1 and before != ARRIVAL_UNKNOWN and before != edge
+
+
 @njit(cache=True, nogil=True)
 def viterbi_arrivals_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    em, tr, kinds, pair, cand_edge, move_score, move_arrival, arrival_of
+    em, tr, pair, cand_edge, move_score, move_arrival, arrival_of
 ):
     """
     Viterbi over a trellis whose holds across edges depend on how the car got there.
@@ -93,15 +99,17 @@ def viterbi_arrivals_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover
     on. Each state carries the edge its best path drove onto its edge from (``arrival``,
     an edge or :data:`~mapmatch.hmm.routes.ARRIVAL_UNKNOWN` at a piece's start); where a
     hold across edges leads to an edge other than that, the pair scores its move instead
-    (``move_score``). Otherwise a state on the
-    edge into a junction the car never drove hides a turn round there: the next move is
-    scored from that edge, as a straight route, and the U-turn is never paid for.
+    (``move_score``). Otherwise a state on the edge into a junction the car never drove
+    hides a turn round there: the next move is scored from that edge, as a straight route,
+    and the U-turn is never paid for.
 
-    ``pair`` maps each padded transition to its pair (-1: none) in ``move_score``,
+    ``pair`` maps each padded transition to its pair ``i`` in ``move_score``,
     ``move_arrival`` and ``arrival_of`` (the arrival when the pair's best explanation is
-    taken; :data:`~mapmatch.hmm.routes.ARRIVAL_SAME`: the state before's own);
-    ``cand_edge`` is each padded candidate's edge. Returns the states, the piece starts, the
-    total and, per padded state, whether its best path's last transition was the move.
+    taken; :data:`~mapmatch.hmm.routes.ARRIVAL_SAME`: the state before's own): ``i``, or
+    ``-2 - i`` where that explanation holds across edges (-1: no pair; one small array read
+    per transition keeps the pass as fast as plain Viterbi). ``cand_edge`` is each padded
+    candidate's edge. Returns the states, the piece starts, the total and, per padded
+    state, whether its best path's last transition was the move.
     """
     n_steps, width = em.shape
     delta = np.full((n_steps, width), -np.inf)
@@ -117,34 +125,32 @@ def viterbi_arrivals_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover
                 continue
             best = -np.inf
             arg = -1
-            came = ARRIVAL_UNKNOWN
-            fell = False
-            for j in range(width):
-                p = pair[t - 1, j, k]
-                if p < 0 or delta[t - 1, j] == -np.inf:
-                    continue
-                score = tr[t - 1, j, k]
-                here = arrival_of[p]
-                move = False
-                across = cand_edge[t, k] != cand_edge[t - 1, j]
-                if kinds[t - 1, j, k] == ROUTE_STANDSTILL and across:
-                    before = arrival[t - 1, j]
-                    if before != ARRIVAL_UNKNOWN and before != cand_edge[t, k]:
-                        score = move_score[p]
-                        here = move_arrival[p]
-                        move = True
-                if here == ARRIVAL_SAME:
-                    here = arrival[t - 1, j]
-                value = delta[t - 1, j] + score
+            for j in range(width):  # plain Viterbi first: a refused hold only lowers a score
+                value = delta[t - 1, j] + tr[t - 1, j, k]
                 if value > best:
                     best = value
                     arg = j
-                    came = here
-                    fell = move
+            fell = False
+            if arg >= 0 and _refused(pair[t - 1, arg, k], arrival[t - 1, arg], cand_edge[t, k]):
+                best = -np.inf
+                arg = -1
+                for j in range(width):
+                    q = pair[t - 1, j, k]
+                    if q == -1:
+                        continue
+                    move = _refused(q, arrival[t - 1, j], cand_edge[t, k])
+                    value = delta[t - 1, j] + (move_score[-2 - q] if move else tr[t - 1, j, k])
+                    if value > best:
+                        best = value
+                        arg = j
+                        fell = move
             if arg >= 0:
+                p = pair[t - 1, arg, k]
+                p = -2 - p if p < -1 else p
+                came = move_arrival[p] if fell else arrival_of[p]
                 delta[t, k] = best + em[t, k]
                 back[t, k] = arg
-                arrival[t, k] = came
+                arrival[t, k] = arrival[t - 1, arg] if came == ARRIVAL_SAME else came
                 moved[t, k] = fell
                 alive = True
         if not alive:
@@ -235,11 +241,10 @@ def viterbi(log_emission: FloatArray, log_transition: FloatArray) -> ViterbiResu
     if em.shape[0] == 0:
         return ViterbiResult(np.empty(0, dtype=np.int64), [], 0.0)
     # no holds: every transition a move along one edge
-    kinds = np.full(tr.shape, ROUTE_SAME_EDGE, dtype=np.int64)
-    pair = np.arange(tr.size, dtype=np.int64).reshape(tr.shape)
+    pair = np.arange(tr.size, dtype=np.int32).reshape(tr.shape)
     same = np.full(tr.size, ARRIVAL_SAME, dtype=np.int64)
     states, starts, total, _ = viterbi_arrivals_kernel(
-        em, tr, kinds, pair, np.zeros(em.shape, dtype=np.int64), tr.ravel(), same, same
+        em, tr, pair, np.zeros(em.shape, dtype=np.int64), tr.ravel(), same, same
     )
     pieces: list[tuple[int, int]] = []
     matched = states >= 0

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mapmatch.hmm.routes import ARRIVAL_HELD, ROUTE_STANDSTILL, ROUTE_VIA_GRAPH
+from mapmatch.hmm.routes import ARRIVAL_HELD
 from mapmatch.hmm.viterbi import posteriors, viterbi, viterbi_arrivals_kernel
 
 
@@ -107,16 +107,15 @@ def _held_across_trellis(arrived_from: int) -> tuple[np.ndarray, ...]:
     """
     em = np.array([[0.0, -np.inf], [0.0, -np.inf], [0.0, 0.0]])
     tr = np.full((2, 2, 2), -np.inf)
-    kinds = np.full((2, 2, 2), -1, dtype=np.int64)
-    pair = np.full((2, 2, 2), -1, dtype=np.int64)
-    tr[0, 0, 0], kinds[0, 0, 0], pair[0, 0, 0] = -1.0, ROUTE_VIA_GRAPH, 0
-    tr[1, 0, 0], kinds[1, 0, 0], pair[1, 0, 0] = -1.0, ROUTE_STANDSTILL, 1
-    tr[1, 0, 1], kinds[1, 0, 1], pair[1, 0, 1] = -3.0, ROUTE_VIA_GRAPH, 2
+    pair = np.full((2, 2, 2), -1, dtype=np.int32)
+    tr[0, 0, 0], pair[0, 0, 0] = -1.0, 0
+    tr[1, 0, 0], pair[1, 0, 0] = -1.0, -2 - 1  # the hold across edges
+    tr[1, 0, 1], pair[1, 0, 1] = -3.0, 2
     cand_edge = np.array([[10, -1], [20, -1], [30, 40]], dtype=np.int64)
     move_score = np.array([-1.0, -5.0, -3.0])
     move_arrival = np.array([arrived_from, 20, 20], dtype=np.int64)
     arrival_of = np.array([arrived_from, ARRIVAL_HELD, 20], dtype=np.int64)
-    return em, tr, kinds, pair, cand_edge, move_score, move_arrival, arrival_of
+    return em, tr, pair, cand_edge, move_score, move_arrival, arrival_of
 
 
 def test_a_hold_across_edges_stands_only_on_the_edge_the_car_arrived_by() -> None:
