@@ -22,6 +22,7 @@ from numba import njit
 
 from mapmatch.hmm.observations import sigma_of_distances
 from mapmatch.result import MatchedPoints, Segment
+from roadnets.spatial_kernels import points_on_edges
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -199,7 +200,8 @@ def odometer_ends(
     if not moved.any():
         return out, points
     at = np.flatnonzero(moved)
-    x, y = net.point_on_edge(points.edge[at], offset[at])
+    # the kernel itself: these edges and offsets are the path's own, nothing to check
+    x, y = points_on_edges(points.edge[at], offset[at], *net.kernel_geometry)
     lon, lat = points.lon.copy(), points.lat.copy()
     lon[at], lat[at] = net.unproject(x, y)
     fx, fy = net.project(points.raw_lon[at], points.raw_lat[at])
