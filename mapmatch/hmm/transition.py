@@ -137,6 +137,22 @@ def transition_score(gc, route, time, uturn, dt, sigma, travel, slack, penalty, 
     return score if np.isfinite(route) else -np.inf
 
 
+@njit(cache=True, nogil=True, inline="always")
+def travel_explains_turn(gc, route, travel, slack, params):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """
+    Whether the distance the trace says it travelled is evidence of a U-turn route.
+
+    It is when that travel is trusted (its slack at most :data:`TRUSTED_SLACK_FRAC` of it),
+    fits the route within the travel tolerance, and is longer than the straight line by more
+    than that: an odometer that reads 120 m between fixes 15 m apart, with the turn round 60 m
+    up a spur, says the car went there and came back.
+    """
+    if not (np.isfinite(travel) and slack <= TRUSTED_SLACK_FRAC * travel):
+        return False
+    tolerance = params[P_TRAVEL_TOLERANCE_M] + params[P_TRAVEL_TOLERANCE_FRAC] * travel + slack
+    return abs(route - travel) <= tolerance and travel - gc > tolerance
+
+
 @njit(cache=True, nogil=True)
 def _scores(gc, route, time, kind, dt, sigma, travel, slack, penalty, params):  # type: ignore[no-untyped-def]  # pragma: no cover
     out = np.empty(len(gc))
@@ -414,16 +430,22 @@ def transitions_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - co
         )
         forced = min(penalty[k], params[P_UTURN_EVIDENCE_PENALTY])
         turn = kind[k] == ROUTE_UTURN_AT_NODE
+        # and a turn round the travel explains costs what evidence does too
+        evidence = dead_end or (
+            turn and travel_explains_turn(step_m[t], route, travel, slack, params)
+        )
         lt[k] = transition_score(
             step_m[t], route, free, turn, dt[t], s, travel, slack,
-            forced if dead_end else penalty[k], params,
+            forced if evidence else penalty[k], params,
         )  # fmt: skip
         # a U-turn in the middle of the road
         u = uturn_route(e2, oa[k], ob[k], edge_len[e1], edge_twin[e1])
         if np.isfinite(u):
             cost = penalty[k]
             short_of_end = edge_len[e1] - max(oa[k], edge_len[e1] - ob[k])
-            if dead_end and short_of_end <= tolerance[k]:
+            if (dead_end and short_of_end <= tolerance[k]) or travel_explains_turn(
+                step_m[t], u, travel, slack, params
+            ):
                 cost = forced
             score = transition_score(
                 step_m[t], u, u / edge_speed[e1], True, dt[t], s, travel, slack, cost, params
