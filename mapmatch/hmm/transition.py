@@ -107,6 +107,18 @@ def _max0(v):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     return v if np.isnan(v) or v > 0.0 else 0.0
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _trusted(travel, slack):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """Whether the trace says how far it travelled, closely enough to judge a route by."""
+    return np.isfinite(travel) and slack <= TRUSTED_SLACK_FRAC * travel
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _travel_tolerance(travel, slack, params):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """How far a route may differ from the travel at no cost (NaN without a travel)."""
+    return params[P_TRAVEL_TOLERANCE_M] + params[P_TRAVEL_TOLERANCE_FRAC] * travel + slack
+
+
 @njit(cache=True, nogil=True)
 def transition_score(gc, route, time, uturn, dt, sigma, travel, slack, penalty, params):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
@@ -121,7 +133,7 @@ def transition_score(gc, route, time, uturn, dt, sigma, travel, slack, penalty, 
     # where the trace says how far the car went (a winding road is long against its chord),
     # which keeps a share of the chord's charge so the chord still decides between routes
     gap = abs(gc - route)
-    if np.isfinite(travel) and slack <= TRUSTED_SLACK_FRAC * travel:
+    if _trusted(travel, slack):
         gap = min(gap, abs(travel - route) + TRAVEL_CHORD_SHARE * gap)
     score = -gap / beta
     needed = _max0(route - 2.0 * sigma) / dt if timed else np.nan
@@ -129,8 +141,7 @@ def transition_score(gc, route, time, uturn, dt, sigma, travel, slack, penalty, 
     allowed = params[P_SPEED_FACTOR] * limit + params[P_SPEED_MARGIN]
     excess = _max0(needed - allowed)
     score = score - 0.5 * (_nan_to_num(excess) / params[P_SPEED_SIGMA]) ** 2
-    tolerance = params[P_TRAVEL_TOLERANCE_M] + params[P_TRAVEL_TOLERANCE_FRAC] * travel + slack
-    off = _max0(abs(route - travel) - tolerance)
+    off = _max0(abs(route - travel) - _travel_tolerance(travel, slack, params))
     score = score - _nan_to_num(off) / params[P_TRAVEL_BETA]
     if uturn:
         score = score - penalty
@@ -147,9 +158,9 @@ def travel_explains_turn(gc, route, travel, slack, params):  # type: ignore[no-u
     than that: an odometer that reads 120 m between fixes 15 m apart, with the turn round 60 m
     up a spur, says the car went there and came back.
     """
-    if not (np.isfinite(travel) and slack <= TRUSTED_SLACK_FRAC * travel):
+    if not _trusted(travel, slack):
         return False
-    tolerance = params[P_TRAVEL_TOLERANCE_M] + params[P_TRAVEL_TOLERANCE_FRAC] * travel + slack
+    tolerance = _travel_tolerance(travel, slack, params)
     return abs(route - travel) <= tolerance and travel - gc > tolerance
 
 

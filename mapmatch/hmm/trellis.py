@@ -23,7 +23,7 @@ from mapmatch.hmm.params import (
     model_params,
 )
 from mapmatch.hmm.pathwalk import EPS_M
-from mapmatch.hmm.routes import ROUTE_STANDSTILL, pairs_kernel, search_bound
+from mapmatch.hmm.routes import ARRIVAL_HELD, pairs_kernel, search_bound
 from mapmatch.hmm.solution import Solution
 from mapmatch.hmm.transition import route_inputs, routes_found, table_pays, transitions_kernel
 from mapmatch.hmm.viterbi import _posterior_kernel, viterbi_arrivals_kernel
@@ -211,8 +211,7 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
             move_score[k] = -np.inf
         tr_pad[t, a_rank[k], b_rank[k]] = score
         kinds[t, a_rank[k], b_rank[k]] = kind[k]
-        across = kind[k] == ROUTE_STANDSTILL and edge[a[k]] != edge[b[k]]
-        pair[t, a_rank[k], b_rank[k]] = -2 - k if across else k
+        pair[t, a_rank[k], b_rank[k]] = -2 - k if arrival[k] == ARRIVAL_HELD else k
     if n:
         states, starts, _, moved = viterbi_arrivals_kernel(
             em_pad, tr_pad, pair, edge_pad, move_score, move_arrival, arrival
