@@ -9,11 +9,14 @@ fix that leaves the group and is followed by one that comes back, the whole excu
 ``outlier_max_gap_s``, is a stray (left out of the centroid, placed on the path afterwards); a
 longer excursion (sparse sampling, or 5 s fixes into a dead end and out) is a car that drove
 somewhere and came back, and starts a group of its own. So does a fix the trace's own travel
-(odometer, else integrated speed) says the car drove to: a step longer than the straight line
-between its fixes by more than the thinning radius (5 s fixes into a 25 m dead end and out lie
-within that radius of each other, and their centroid was a stop). A moving car's
-fixes at 1 s merge in twos or threes, which smooths the noise without losing distance: the path
-still runs through every observation.
+(odometer, else integrated speed) says the car drove to: a travel longer than the straight line
+by more than the thinning radius, over the step into the fix (5 s fixes into a 25 m dead end
+and out lie within that radius of each other, and their centroid was a stop) or since the
+group's first fix once the group holds two fixes (1 s fixes of a car that drives 25 m into a
+dead end and back, scattered round one place by the noise, were one stop and lost the dead
+end; one fix and its strays are one fix's word, which an outlier says just as well). A moving
+car's fixes at 1 s merge in twos or threes, which smooths the noise without losing distance: the
+path still runs through every observation.
 """
 
 from __future__ import annotations
@@ -169,32 +172,57 @@ def _soon(time_s, a, b, max_gap):  # type: ignore[no-untyped-def]  # pragma: no 
     return len(time_s) == 0 or not time_s[b] - time_s[a] > max_gap
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _driven(step, x, y, a, i, travel, radius):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """
+    Whether the trace's travel says the car drove from fix ``a`` to fix ``i``.
+
+    It did when ``travel`` (NaN: unknown) is longer than the straight line between the two
+    fixes by more than ``radius``.
+    """
+    return len(step) > 0 and travel - np.hypot(x[i] - x[a], y[i] - y[a]) > radius
+
+
 @njit(cache=True, nogil=True)
-def _group_kernel(x, y, radius, solo, time_s, max_gap, drove):  # type: ignore[no-untyped-def]  # pragma: no cover
+def _group_kernel(x, y, radius, solo, time_s, max_gap, step):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
     :func:`group_fixes` over arrays.
 
-    ``drove[i]`` (empty: unknown) marks a step into fix ``i`` that the trace's travel says
-    was driven, which starts a new group.
+    ``step[i]`` (empty: unknown) is the trace's travel from fix ``i`` to fix ``i + 1``
+    (NaN where unknown). A step the travel says was driven starts a new group, and so does
+    a fix the group's own travel says the car drove to since the group's first fix, once
+    the group holds two fixes.
     """
     n = len(x)
     group = np.empty(n, dtype=np.int64)
     stray = np.zeros(n, dtype=np.bool_)
     g = 0
     sx, sy, count = x[0], y[0], 1.0
+    start, span = 0, 0.0
     group[0] = 0
     for i in range(1, n):
         cx, cy = sx / count, sy / count
+        moved = step[i - 1] if len(step) else np.nan
         # the ends stay fixes of their own (they bound the length), and a fix the car drove
-        # to is no standing car's scatter, however close it lies
-        if solo[i] or solo[i - 1] or (len(drove) and drove[i]):
+        # to is no standing car's scatter, however close it lies: in one step (5 s fixes
+        # into a dead end and out), or since the group's first fix once it holds two (1 s
+        # fixes of a car that drives into a dead end and back while they stay near their
+        # centroid; one fix alone is noise: a fix 30 m back at 15 m/s)
+        if (
+            solo[i]
+            or solo[i - 1]
+            or _driven(step, x, y, i - 1, i, moved, radius[i])
+            or (count > 1 and _driven(step, x, y, start, i, span + moved, radius[i]))
+        ):
             g += 1
             sx, sy, count = x[i], y[i], 1.0
+            start, span = i, 0.0
             group[i] = g
         elif np.hypot(x[i] - cx, y[i] - cy) <= radius[i] * np.sqrt(1.0 + 1.0 / count):
             sx += x[i]
             sy += y[i]
             count += 1.0
+            span += moved
             group[i] = g
         elif (
             not solo[i + 1]
@@ -210,9 +238,11 @@ def _group_kernel(x, y, radius, solo, time_s, max_gap, drove):  # type: ignore[n
             # max_gap: a stray here; a longer one is a car that drove somewhere and back
             group[i] = g
             stray[i] = True
+            span += moved
         else:
             g += 1
             sx, sy, count = x[i], y[i], 1.0
+            start, span = i, 0.0
             group[i] = g
     return group, stray
 
@@ -256,7 +286,7 @@ def group_fixes(
         _solo(n, np.asarray(starts, dtype=np.int64)),
         times,
         float(config.outlier_max_gap_s),
-        np.zeros(0, dtype=np.bool_),
+        np.zeros(0),
     )
     return np.asarray(group, dtype=np.int64), np.asarray(stray, dtype=bool)
 
@@ -292,26 +322,20 @@ def _mean_into(values, group, stray, count):  # type: ignore[no-untyped-def]  # 
 
 
 @njit(cache=True, nogil=True)
-def _driven_steps(x, y, radius, odometer, speed_m, slack_m, unknown_lo, unknown_hi):  # type: ignore[no-untyped-def]  # pragma: no cover
+def _travel_steps(odometer, speed_m, slack_m, unknown_lo, unknown_hi):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
-    Which steps into each fix the trace's travel says were driven (empty: no travel known).
+    The trace's travel over each step between consecutive fixes (empty: no travel known).
 
-    A step whose travel (odometer, else integrated speed) exceeds the straight line between
-    its fixes by more than the thinning radius: the car went somewhere and came back (5 s
-    fixes into a dead end and out), which a group's centroid would turn into a stop. The
-    travel itself, not less its slack: an integrated speed's slack bounds the worst case
-    (19 m at 5 s), and with it speeds would hardly ever say so (on the noise-free truth it
-    recovers 5 trips instead of 10, on the accuracy matrix none with speeds alone).
+    The odometer's increment, else the speed integral (NaN where unknown). The travel
+    itself, not less its slack: an integrated speed's slack bounds the worst case (19 m at
+    5 s), and with it speeds would hardly ever say a step was driven (on the noise-free
+    truth it recovers 5 trips instead of 10, on the accuracy matrix none with speeds alone).
     """
-    n = len(x)
-    if n == 0 or not (len(odometer) or len(speed_m)):
-        return np.zeros(0, dtype=np.bool_)
+    n = max(len(odometer), len(speed_m))
+    if n == 0:
+        return np.zeros(0)
     travel, _ = between_kernel(np.arange(n), odometer, speed_m, slack_m, unknown_lo, unknown_hi)
-    drove = np.zeros(n, dtype=np.bool_)
-    for i in range(1, n):
-        line = np.hypot(x[i] - x[i - 1], y[i] - y[i - 1])
-        drove[i] = travel[i - 1] - line > radius[i]  # NaN travel: not known to be driven
-    return drove
+    return travel
 
 
 @njit(cache=True, nogil=True)
@@ -331,8 +355,8 @@ def _merge_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compile
     else:
         times = time_s if len(time_s) == n else np.empty(0)
         radius = thinning * sigma
-        drove = _driven_steps(x, y, radius, odometer, speed_m, slack_m, unknown_lo, unknown_hi)
-        group, stray = _group_kernel(x, y, radius, solo, times, max_gap, drove)
+        step = _travel_steps(odometer, speed_m, slack_m, unknown_lo, unknown_hi)
+        group, stray = _group_kernel(x, y, radius, solo, times, max_gap, step)
     count = group[-1] + 1 if n else 0
     first = np.empty(count, dtype=np.int64)
     stop = np.empty(count, dtype=np.int64)

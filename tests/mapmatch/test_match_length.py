@@ -235,6 +235,34 @@ def test_a_drive_into_a_dead_end_and_back_between_5_s_fixes_keeps_the_spur(
     assert result.distance_check.uturns == 1
 
 
+def test_fixes_near_one_place_are_no_stop_when_the_travel_says_the_car_drove() -> None:
+    from mapmatch.config import MatchConfig
+    from mapmatch.hmm.observations import Travel, merge_fixes
+
+    # the accuracy matrix's 1 s / 5 m trip 1 of Helsinki: the car drives 25 m into a dead end
+    # at 4 m/s and back, and the noise keeps its fixes within 7 m of one place; they merged
+    # into one "standing" observation and the 50 m were lost (1.1 % short), odometer or
+    # not. The travel since the group's first fix says the car drove while its fixes stayed
+    # put: no standing car's scatter.
+    def observations(x: np.ndarray, odometer: np.ndarray) -> int:
+        n = len(x)
+        travel = Travel(odometer_m=odometer, speed_m=None, slack_m=None, unknown_lo=None,
+                        unknown_hi=None)  # fmt: skip
+        fixes = merge_fixes(x, np.zeros(n), np.arange(n, dtype=float), np.full(n, 5.0),
+                            np.full(n, 25.0), np.full(n, np.nan), None, travel,
+                            MatchConfig())  # fmt: skip
+        return len(fixes)
+
+    x = np.r_[-60.0, np.random.default_rng(5).uniform(-3.5, 3.5, 12), 60.0]
+    assert observations(x, np.zeros(14)) == 3  # a stop between two fixes of their own
+    assert observations(x, 4.0 * np.arange(14)) > 3
+    # at 15 m/s a fix thrown 17 m ahead (a stray of the fix before) and the next 30 m behind,
+    # back by that fix: one fix's word against the travel, not a drive out and back (it was
+    # an observation of its own, 30 m behind, which the match explained with a loop)
+    x = np.array([-60.0, 2.1, 20.0, 3.1, 35.0, 50.0, 65.0])
+    assert observations(x, 15.0 * np.arange(7)) == 5
+
+
 @pytest.mark.parametrize("start_x", [-275.0, -295.0])
 def test_a_fifteen_second_drive_to_a_dead_ends_end_keeps_the_end(
     tmp_path: Path, start_x: float
