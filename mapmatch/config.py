@@ -352,6 +352,26 @@ class MatchConfig:
         ge=0,
         le=1000,
     )
+    detour_outlier_nats: float = _param(
+        20.0,
+        doc="where the path holds a transition below minus this, the fixes near it are tried "
+        "for a fix thrown onto another road (at sparse sampling the outlier tests do not "
+        "judge it, and the path went round the block for it: Helsinki 15 s trip 14 +49 %), "
+        "and one is left out when that scores the path this much better; more than a "
+        "U-turn without evidence costs, so a drive to a dead end's end keeps its fix",
+        unit="nats",
+        gt=0,
+        le=1e6,
+    )
+    max_detour_tries: int = _param(
+        8,
+        doc="fixes tried at most per match for detour_outlier_nats, each bridged by a "
+        "two-fix trellis (0: never); on the accuracy matrix 4 tries find 7 of the 10 trips "
+        "8 find, 16 no more",
+        kind="int",
+        ge=0,
+        le=1000,
+    )
     # --- observations and outliers
     thinning_sigmas: float = _param(
         2.0,

@@ -21,6 +21,7 @@ from mapmatch.config import MatchConfig
 from mapmatch.distance import Evidence, check_distance, chord_length_m, measured_span
 from mapmatch.errors import DeadlineExceededError, NoCandidatesError
 from mapmatch.hmm.assemble import assemble
+from mapmatch.hmm.detours import drop_detour_fixes
 from mapmatch.hmm.ends import odometer_ends
 from mapmatch.hmm.fixes import (
     Fixes,
@@ -138,6 +139,9 @@ def match(
 
     solution = solve(net, obs, cands, used, cut_after, config)
     repairs = 0
+    detoured = drop_detour_fixes(net, obs, cands, solution, missing_before, config)
+    if detoured is not None:
+        solution, _ = detoured
     _check_deadline(deadline, trace, "viterbi")
     if solution.breaks and config.max_break_repairs:
         repaired = repair_breaks(net, obs, cands, solution, missing_before, config)

@@ -1,0 +1,190 @@
+"""
+Observations that only a detour explains: a displaced fix the outlier tests cannot judge.
+
+The outlier tests (:mod:`mapmatch.hmm.selection`) judge a fix against its neighbours only
+where they are at most ``outlier_max_gap_s`` apart, since at sparse sampling a fix that
+sticks out is usually a car that went somewhere. But a fix thrown 40 m off at 15 s can land
+on another road, and then the best path the model can find goes there and back: Helsinki's
+15 s trip 14 of the accuracy matrix left a 354 m service road for one fix 55 m off it and
+matched 49 % too long, two transitions of -33 and -48 nats on its path where the rest cost
+less than 4. So where the solved path holds a transition below ``-detour_outlier_nats``,
+the inner observations within ``_WINDOW`` of it are tried, those that stick out most from
+their neighbours first: each is bridged (its neighbours' two-observation trellis) and the
+best path through the bridge scored from the solved trellis. The best of them is left out
+and the trace solved again; that solution is taken when its path scores more than
+``detour_outlier_nats`` better (the left-out fix's emission and both its transitions
+against the one transition that bridges it), and the search goes on for a second such fix.
+A genuine drive the path explains with a costly transition (a U-turn without evidence at
+a dead end's end costs ``uturn_penalty``, 14 nats) gains less than that by losing its fix,
+and keeps it. A piece's ends are never tried: leaving one out drops its transition with
+nothing to bridge it. The left-out fixes are placed on the path afterwards, as a break
+repair's are.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from mapmatch.hmm.trellis import cuts, solve
+
+if TYPE_CHECKING:
+    from mapmatch.config import MatchConfig
+    from mapmatch.hmm.candidates import Candidates
+    from mapmatch.hmm.observations import Observations
+    from mapmatch.hmm.solution import Solution
+    from mapmatch.types import FloatArray, IntArray
+    from roadnets import RoadNetwork
+
+__all__ = ["drop_detour_fixes", "path_score"]
+
+#: how far from a costly transition (in observations) the fix that forced it is looked for:
+#: Helsinki 15 s trip 14's lay 4 and 7 observations from the two
+_WINDOW = 8
+
+
+def path_score(solution: Solution) -> float:
+    """
+    The log score of the solution's chosen path: its emissions and its transitions.
+
+    Transitions across a break (between pieces) are not part of any path and count nothing.
+    """
+    states, used = solution.states, len(solution.used)
+    if used == 0:
+        return 0.0
+    score = float(solution.log_emission[np.arange(used), states].sum())
+    inside = np.ones(max(used - 1, 0), dtype=bool)
+    for start, _ in solution.pieces[1:]:
+        inside[start - 1] = False
+    steps = np.flatnonzero(inside)
+    if len(steps):
+        score += float(solution.log_transition[steps, states[steps], states[steps + 1]].sum())
+    return score
+
+
+def _best_paths(solution: Solution) -> tuple[FloatArray, FloatArray]:
+    """
+    Per used position and candidate, the best path score up to it and on after it.
+
+    ``ahead[t, k]``: the best score of a path from its piece's start that ends in candidate
+    ``k`` of position ``t`` (its emission included); ``behind[t, k]``: the best score of
+    the rest of the piece after it (emission of ``t`` excluded). Max-product over the solved
+    trellis' emissions and transitions.
+    """
+    em, tr = solution.log_emission, solution.log_transition
+    ahead, behind = np.full(em.shape, -np.inf), np.full(em.shape, -np.inf)
+    for start, stop in solution.pieces:
+        ahead[start] = em[start]
+        for t in range(start + 1, stop):
+            ahead[t] = em[t] + (ahead[t - 1][:, None] + tr[t - 1]).max(axis=0)
+        behind[stop - 1] = 0.0
+        for t in range(stop - 2, start - 1, -1):
+            behind[t] = (tr[t] + (em[t + 1] + behind[t + 1])[None, :]).max(axis=1)
+    return ahead, behind
+
+
+def _costly_steps(solution: Solution, floor: float) -> IntArray:
+    """Used positions ``t`` whose chosen transition from ``t - 1`` scores below ``floor``."""
+    states = solution.states
+    steps = np.arange(1, len(solution.used))
+    if not len(steps):
+        return steps
+    scores = solution.log_transition[steps - 1, states[steps - 1], states[steps]]
+    inside = np.ones(len(steps), dtype=bool)
+    for start, _ in solution.pieces[1:]:
+        inside[start - 1] = False
+    return np.asarray(steps[inside & (scores < floor)], dtype=np.int64)
+
+
+def drop_detour_fixes(
+    net: RoadNetwork,
+    obs: Observations,
+    cands: Candidates,
+    solution: Solution,
+    missing_before: IntArray,
+    config: MatchConfig,
+) -> tuple[Solution, int] | None:
+    """
+    Leave out the observations only a detour explains (see the module's description).
+
+    Parameters
+    ----------
+    net, obs, cands
+        What :func:`~mapmatch.hmm.trellis.solve` solved.
+    solution
+        Its solution.
+    missing_before
+        From :func:`~mapmatch.hmm.trellis.model_fixes`: where the trace splits.
+    config
+        ``detour_outlier_nats``; ``max_detour_tries`` (fixes tried in all) bounds the search.
+
+    Returns
+    -------
+    tuple of Solution and int, or None
+        The better solution and how many observations it left out; ``None`` when no
+        transition is that costly or leaving a fix out does not pay.
+    """
+    nats, tries = config.detour_outlier_nats, config.max_detour_tries
+    dropped = 0
+    while tries > 0:
+        costly = _costly_steps(solution, -nats)
+        if not len(costly):
+            break
+        used = solution.used
+        # a piece's ends are left alone: leaving one out drops its transition with nothing
+        # to bridge it (a 30 s step round a hairpin costs 20 nats on the noise-free truth),
+        # and the end tests judge them
+        piece = np.empty(len(used), dtype=np.int64)
+        inner = np.ones(len(used), dtype=bool)
+        for k, (start, stop) in enumerate(solution.pieces):
+            piece[start:stop] = k
+            inner[[start, stop - 1]] = False
+        positions = np.flatnonzero(inner)
+        if not len(positions):
+            break
+        # within the detour, the fixes that stick out most from their neighbours first: the
+        # fix that forced it is thrown off, and the detour can start and end far from it
+        reach = np.abs(positions[:, None] - costly[None, :]).min(axis=1)
+        positions = positions[reach <= _WINDOW]
+        xs, ys = obs.x[used], obs.y[used]
+        mid_x = 0.5 * (xs[positions - 1] + xs[positions + 1])
+        mid_y = 0.5 * (ys[positions - 1] + ys[positions + 1])
+        sticks_out = np.hypot(xs[positions] - mid_x, ys[positions] - mid_y)
+        order = positions[np.argsort(-sticks_out, kind="stable")][:tries]
+        # each try bridges the fix's neighbours (a two-observation trellis) and scores the
+        # best path through that bridge from the solved trellis, forwards and backwards:
+        # solving the stretch around every fix with and without it cost 1.6x the whole
+        # match on Helsinki 15 s. The trellis alone knows no arrival rule (a fix held behind
+        # a junction stands on the road the car came by), so it only ranks the fixes, and
+        # the best is solved whole (solving the best two found no more on the matrix)
+        ahead, behind = _best_paths(solution)
+        estimates: list[tuple[float, int]] = []
+        for drop in order:
+            tries -= 1
+            pair = used[[drop - 1, drop + 1]]
+            bridge = solve(net, obs, cands, pair, cuts(pair, missing_before), config)
+            width = bridge.log_transition.shape[-1] if len(bridge.log_transition) else 0
+            if not width:
+                continue
+            k = bridge.log_transition.shape[1]
+            through = (
+                ahead[drop - 1, :k, None]
+                + bridge.log_transition[0]
+                + (solution.log_emission[drop + 1, :width] + behind[drop + 1, :width])[None, :]
+            )
+            _, stop = solution.pieces[piece[drop]]
+            gain = float(through.max()) - float(ahead[stop - 1].max())
+            if gain > nats:
+                estimates.append((gain, int(drop)))
+        if not estimates:
+            break
+        _, drop = max(estimates)
+        kept = np.delete(used, drop)
+        trial = solve(net, obs, cands, kept, cuts(kept, missing_before), config)
+        gained = path_score(trial) - path_score(solution) > nats
+        if not gained or len(trial.pieces) > len(solution.pieces):
+            break
+        solution = trial
+        dropped += 1
+    return (solution, dropped) if dropped else None
