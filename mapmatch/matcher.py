@@ -93,7 +93,7 @@ def match(
         Also return every candidate with its scores (``result.diagnostics``), for inspection.
     deadline
         A :func:`time.monotonic` time past which the match gives up: checked between its
-        stages (candidates, selection, Viterbi, break repair, assembly), so a caller with a
+        stages (candidates, selection, Viterbi, detours, break repair, assembly), so a caller with a
         time budget (the HTTP service) gets its thread back soon after the budget is spent.
 
     Returns
@@ -139,10 +139,13 @@ def match(
 
     solution = solve(net, obs, cands, used, cut_after, config)
     repairs = 0
+    _check_deadline(deadline, trace, "viterbi")
     detoured = drop_detour_fixes(net, obs, cands, solution, missing_before, config)
     if detoured is not None:
-        solution, _ = detoured
-    _check_deadline(deadline, trace, "viterbi")
+        # a fix only a detour explained is a displaced one, and says so in the output
+        outlier[np.setdiff1d(solution.used, detoured[0].used)] = True
+        solution = detoured[0]
+        _check_deadline(deadline, trace, "detours")
     if solution.breaks and config.max_break_repairs:
         repaired = repair_breaks(net, obs, cands, solution, missing_before, config)
         if repaired is not None:

@@ -17,8 +17,8 @@ against the one transition that bridges it), and the search goes on for a second
 A genuine drive the path explains with a costly transition (a U-turn without evidence at
 a dead end's end costs ``uturn_penalty``, 14 nats) gains less than that by losing its fix,
 and keeps it. A piece's ends are never tried: leaving one out drops its transition with
-nothing to bridge it. The left-out fixes are placed on the path afterwards, as a break
-repair's are.
+nothing to bridge it. A left-out fix is an outlier in the output (placed on the path when
+that lies within its search radius, else unmatched).
 """
 
 from __future__ import annotations
