@@ -4,8 +4,9 @@ The unsettled window of a live trip as one HMM, solved by the offline stages.
 The window is the settled prefix's last observation (the *anchor*) followed by the unsettled
 observations in use. :func:`solve_window` hands it to :func:`~mapmatch.hmm.trellis.solve` as
 it is, the anchor's candidates cut down to the one it settled on (that is the prior the window
-starts from: every path leaves from there), repairs its breaks and assembles its path as
-:func:`mapmatch.match` does (:func:`~mapmatch.hmm.trellis.repair_breaks`,
+starts from: every path leaves from there), leaves out a fix only a detour explains, repairs
+its breaks and assembles its path as :func:`mapmatch.match` does
+(:func:`~mapmatch.hmm.detours.drop_detour_fixes`, :func:`~mapmatch.hmm.trellis.repair_breaks`,
 :func:`~mapmatch.hmm.assemble.assemble`). :func:`place_on_path` finds each observation's chosen
 position on that path, where the settled part can be cut off, and :func:`path_confidence` how
 sure the window is of it.
@@ -19,6 +20,7 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 
 from mapmatch.hmm.assemble import assemble
+from mapmatch.hmm.detours import drop_detour_fixes
 from mapmatch.hmm.trellis import cuts, repair_breaks, solve
 
 if TYPE_CHECKING:
@@ -72,6 +74,11 @@ def solve_window(
     """
     solution = solve(net, model.obs, cands, used, cuts(used, missing_before), config)
     repairs = 0
+    detoured = drop_detour_fixes(net, model.obs, cands, solution, missing_before, config)
+    if detoured is not None:  # a fix only a detour explained is an outlier, as in match
+        outlier = outlier.copy()
+        outlier[np.setdiff1d(solution.used, detoured[0].used)] = True
+        solution = detoured[0]
     if solution.breaks and config.max_break_repairs:
         repaired = repair_breaks(net, model.obs, cands, solution, missing_before, config)
         if repaired is not None:

@@ -104,6 +104,23 @@ def test_an_unbounded_lag_is_the_offline_match(
         assert online.stats.model_points == offline.stats.model_points
 
 
+def test_a_fix_only_a_detour_explains_is_left_out_live_as_offline(
+    melbourne_net: roadnets.RoadNetwork,
+) -> None:
+    from mapmatch.evaluation.accuracy.conditions import condition_config
+
+    # the accuracy matrix's 30 s trip 18 of Melbourne, positions only: one fix thrown onto
+    # another road, which the offline match leaves out as an outlier (hmm.detours)
+    trip = simulate_trips(melbourne_net, condition_config("30s-20m"), count=1, seed=1018)[0]
+    trace = strip_to_class(trip.trace, "positions")
+    offline = mapmatch.match(trace, melbourne_net)
+    assert offline.points.outlier.any()
+    online, _ = run_live(melbourne_net, trace, lag=None)
+    assert path_of(online) == path_of(offline)
+    assert online.matched_length_m == offline.matched_length_m
+    assert_same_points(online.points, offline.points)
+
+
 def test_a_lag_longer_than_the_trip_is_the_offline_match_on_sparse_fixes(
     melbourne_net: roadnets.RoadNetwork,
 ) -> None:
