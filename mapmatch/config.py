@@ -363,6 +363,17 @@ class MatchConfig:
         gt=0,
         le=1e6,
     )
+    detour_max_emission_loss: float = _param(
+        5.0,
+        doc="a fix is not left out for detour_outlier_nats when the other fixes' emissions "
+        "then lose more than this: the gain came from moving them onto a wrong road (the "
+        "emission floor makes that cheap), not from a detour gone (Monaco 30 s peer trip 11, "
+        "odometer: 10 nats lost and 45 % mismatch; the accuracy matrix's drops change them "
+        "by -4.4 .. +53)",
+        unit="nats",
+        ge=0,
+        le=1e6,
+    )
     max_detour_tries: int = _param(
         8,
         doc="fixes tried at most per match for detour_outlier_nats, each bridged by a "

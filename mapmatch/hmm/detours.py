@@ -16,9 +16,10 @@ and the trace solved again; that solution is taken when its path scores more tha
 against the one transition that bridges it), and the search goes on for a second such fix.
 A genuine drive the path explains with a costly transition (a U-turn without evidence at
 a dead end's end costs ``uturn_penalty``, 14 nats) gains less than that by losing its fix,
-and keeps it. A piece's ends are never tried: leaving one out drops its transition with
-nothing to bridge it. A left-out fix is an outlier in the output (placed on the path when
-that lies within its search radius, else unmatched).
+and keeps it. Nor may the gain come from the other fixes: when their emissions lose more
+than ``detour_max_emission_loss`` the fix stays. A piece's ends are never tried: leaving
+one out drops its transition with nothing to bridge it. A left-out fix is an outlier in the
+output (placed on the path when that lies within its search radius, else unmatched).
 """
 
 from __future__ import annotations
@@ -184,6 +185,13 @@ def drop_detour_fixes(
         trial = solve(net, obs, cands, kept, cuts(kept, missing_before), config)
         gained = path_score(trial) - path_score(solution) > nats
         if not gained or len(trial.pieces) > len(solution.pieces):
+            break
+        # the gain must not come from moving the other fixes off their roads (the emission
+        # floor makes a wrong road cheap for a fix or two)
+        others = np.delete(np.arange(len(used)), drop)
+        before = solution.log_emission[others, solution.states[others]].sum()
+        after = trial.log_emission[np.arange(len(trial.used)), trial.states].sum()
+        if before - after > config.detour_max_emission_loss:
             break
         solution = trial
         dropped += 1
