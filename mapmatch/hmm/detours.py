@@ -118,7 +118,8 @@ def drop_detour_fixes(
     missing_before
         From :func:`~mapmatch.hmm.trellis.model_fixes`: where the trace splits.
     config
-        ``detour_outlier_nats``; ``max_detour_tries`` (fixes tried in all) bounds the search.
+        ``detour_outlier_nats`` and ``detour_max_emission_loss`` decide;
+        ``max_detour_tries`` (fixes tried in all) bounds the search.
 
     Returns
     -------
