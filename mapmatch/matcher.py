@@ -143,8 +143,8 @@ def match(
     detoured = drop_detour_fixes(net, obs, cands, solution, missing_before, config)
     if detoured is not None:
         # a fix only a detour explained is a displaced one, and says so in the output
-        outlier[np.setdiff1d(solution.used, detoured[0].used)] = True
-        solution = detoured[0]
+        solution, left_out = detoured
+        outlier[left_out] = True
         _check_deadline(deadline, trace, "detours")
     if solution.breaks and config.max_break_repairs:
         repaired = repair_breaks(net, obs, cands, solution, missing_before, config)

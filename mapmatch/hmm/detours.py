@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from mapmatch.hmm.candidates import Candidates
     from mapmatch.hmm.observations import Observations
     from mapmatch.hmm.solution import Solution
-    from mapmatch.types import FloatArray, IntArray
+    from mapmatch.types import BoolArray, FloatArray, IntArray
     from roadnets import RoadNetwork
 
 __all__ = ["drop_detour_fixes", "path_score"]
@@ -51,17 +51,23 @@ def path_score(solution: Solution) -> float:
 
     Transitions across a break (between pieces) are not part of any path and count nothing.
     """
-    states, used = solution.states, len(solution.used)
-    if used == 0:
-        return 0.0
-    score = float(solution.log_emission[np.arange(used), states].sum())
-    inside = np.ones(max(used - 1, 0), dtype=bool)
+    states = solution.states
+    steps = np.flatnonzero(_inside(solution))
+    transitions = solution.log_transition[steps, states[steps], states[steps + 1]]
+    return float(_chosen_emissions(solution).sum() + transitions.sum())
+
+
+def _chosen_emissions(solution: Solution) -> FloatArray:
+    """The log emission of each used position's chosen candidate."""
+    return solution.log_emission[np.arange(len(solution.used)), solution.states]
+
+
+def _inside(solution: Solution) -> BoolArray:
+    """For each step ``t -> t + 1`` between used positions, whether it lies inside a piece."""
+    inside = np.ones(max(len(solution.used) - 1, 0), dtype=bool)
     for start, _ in solution.pieces[1:]:
         inside[start - 1] = False
-    steps = np.flatnonzero(inside)
-    if len(steps):
-        score += float(solution.log_transition[steps, states[steps], states[steps + 1]].sum())
-    return score
+    return inside
 
 
 def _best_paths(solution: Solution) -> tuple[FloatArray, FloatArray]:
@@ -89,13 +95,8 @@ def _costly_steps(solution: Solution, floor: float) -> IntArray:
     """Used positions ``t`` whose chosen transition from ``t - 1`` scores below ``floor``."""
     states = solution.states
     steps = np.arange(1, len(solution.used))
-    if not len(steps):
-        return steps
     scores = solution.log_transition[steps - 1, states[steps - 1], states[steps]]
-    inside = np.ones(len(steps), dtype=bool)
-    for start, _ in solution.pieces[1:]:
-        inside[start - 1] = False
-    return np.asarray(steps[inside & (scores < floor)], dtype=np.int64)
+    return np.asarray(steps[_inside(solution) & (scores < floor)], dtype=np.int64)
 
 
 def drop_detour_fixes(
@@ -105,7 +106,7 @@ def drop_detour_fixes(
     solution: Solution,
     missing_before: IntArray,
     config: MatchConfig,
-) -> tuple[Solution, int] | None:
+) -> tuple[Solution, IntArray] | None:
     """
     Leave out the observations only a detour explains (see the module's description).
 
@@ -123,12 +124,12 @@ def drop_detour_fixes(
 
     Returns
     -------
-    tuple of Solution and int, or None
-        The better solution and how many observations it left out; ``None`` when no
-        transition is that costly or leaving a fix out does not pay.
+    tuple of Solution and IntArray, or None
+        The better solution and the observations it left out (indices into ``obs``);
+        ``None`` when no transition is that costly or leaving a fix out does not pay.
     """
     nats, tries = config.detour_outlier_nats, config.max_detour_tries
-    dropped = 0
+    left_out: list[int] = []
     while tries > 0:
         costly = _costly_steps(solution, -nats)
         if not len(costly):
@@ -166,12 +167,11 @@ def drop_detour_fixes(
             tries -= 1
             pair = used[[drop - 1, drop + 1]]
             bridge = solve(net, obs, cands, pair, cuts(pair, missing_before), config)
-            width = bridge.log_transition.shape[-1] if len(bridge.log_transition) else 0
-            if not width:
+            width = bridge.log_transition.shape[-1]  # the pair's padding, within the trace's
+            if not len(bridge.log_transition) or not width:
                 continue
-            k = bridge.log_transition.shape[1]
             through = (
-                ahead[drop - 1, :k, None]
+                ahead[drop - 1, :width, None]
                 + bridge.log_transition[0]
                 + (solution.log_emission[drop + 1, :width] + behind[drop + 1, :width])[None, :]
             )
@@ -189,11 +189,9 @@ def drop_detour_fixes(
             break
         # the gain must not come from moving the other fixes off their roads (the emission
         # floor makes a wrong road cheap for a fix or two)
-        others = np.delete(np.arange(len(used)), drop)
-        before = solution.log_emission[others, solution.states[others]].sum()
-        after = trial.log_emission[np.arange(len(trial.used)), trial.states].sum()
-        if before - after > config.detour_max_emission_loss:
+        before = np.delete(_chosen_emissions(solution), drop).sum()
+        if before - _chosen_emissions(trial).sum() > config.detour_max_emission_loss:
             break
+        left_out.append(int(used[drop]))
         solution = trial
-        dropped += 1
-    return (solution, dropped) if dropped else None
+    return (solution, np.asarray(left_out, dtype=np.int64)) if left_out else None

@@ -173,14 +173,14 @@ def _soon(time_s, a, b, max_gap):  # type: ignore[no-untyped-def]  # pragma: no 
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _driven(step, x, y, a, i, travel, radius):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+def _driven(x, y, a, i, travel, radius):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     """
     Whether the trace's travel says the car drove from fix ``a`` to fix ``i``.
 
-    It did when ``travel`` (NaN: unknown) is longer than the straight line between the two
-    fixes by more than ``radius``.
+    It did when ``travel`` is longer than the straight line between the two fixes by more
+    than ``radius``; an unknown travel (NaN) says nothing.
     """
-    return len(step) > 0 and travel - np.hypot(x[i] - x[a], y[i] - y[a]) > radius
+    return travel - np.hypot(x[i] - x[a], y[i] - y[a]) > radius
 
 
 @njit(cache=True, nogil=True)
@@ -211,8 +211,8 @@ def _group_kernel(x, y, radius, solo, time_s, max_gap, step):  # type: ignore[no
         if (
             solo[i]
             or solo[i - 1]
-            or _driven(step, x, y, i - 1, i, moved, radius[i])
-            or (count > 1 and _driven(step, x, y, start, i, span + moved, radius[i]))
+            or _driven(x, y, i - 1, i, moved, radius[i])
+            or (count > 1 and _driven(x, y, start, i, span + moved, radius[i]))
         ):
             g += 1
             sx, sy, count = x[i], y[i], 1.0

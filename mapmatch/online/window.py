@@ -76,9 +76,9 @@ def solve_window(
     repairs = 0
     detoured = drop_detour_fixes(net, model.obs, cands, solution, missing_before, config)
     if detoured is not None:  # a fix only a detour explained is an outlier, as in match
+        solution, left_out = detoured
         outlier = outlier.copy()
-        outlier[np.setdiff1d(solution.used, detoured[0].used)] = True
-        solution = detoured[0]
+        outlier[left_out] = True
     if solution.breaks and config.max_break_repairs:
         repaired = repair_breaks(net, model.obs, cands, solution, missing_before, config)
         if repaired is not None:

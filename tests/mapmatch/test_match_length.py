@@ -265,7 +265,7 @@ def test_fixes_near_one_place_are_no_stop_when_the_travel_says_the_car_drove() -
 
 @pytest.mark.parametrize(("index", "input_class"), [(18, "positions"), (12, "heading_speed")])
 def test_a_fix_thrown_onto_another_road_at_thirty_seconds_sends_no_detour(
-    index: int, input_class: str, data_dir: Path, cache_dir: Path
+    index: int, input_class: str, melbourne_net: roadnets.RoadNetwork
 ) -> None:
     from mapmatch.config import MatchConfig
 
@@ -273,7 +273,7 @@ def test_a_fix_thrown_onto_another_road_at_thirty_seconds_sends_no_detour(
     # lands on another road, which the outlier tests do not judge at 30 s; the path went
     # round the block for it, +25 % and +27 % (transitions of 20-50 nats where the rest cost
     # a few). Leaving out the fix the detour hangs on scores the path far better.
-    net = roadnets.load(data_dir / "melbourne-suburb_au.osm.pbf", cache_dir=cache_dir)
+    net = melbourne_net
     cfg = condition_config("30s-20m")
     trip = simulate_trips(net, cfg, count=1, seed=1000 + index)[0]
     trace = strip_to_class(trip.trace, input_class)
