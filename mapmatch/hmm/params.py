@@ -46,6 +46,7 @@ PARAMS = (
     "route_reach_mps",
     "travel_accel_mps2",
     "uturn_speed_mps",
+    "course_prune_deg",
 )
 (
     P_MAX_EMISSION_PENALTY,
@@ -75,6 +76,7 @@ PARAMS = (
     P_ROUTE_REACH,
     P_ACCEL,
     P_UTURN_SPEED,
+    P_COURSE_PRUNE,
 ) = range(len(PARAMS))
 
 _CACHE: dict[int, tuple[MatchConfig, FloatArray]] = {}

@@ -14,10 +14,11 @@ import numpy as np
 from numba import njit
 
 from mapmatch.hmm.candidates import Candidates
-from mapmatch.hmm.emission import distance_score, heading_score, speed_weight
+from mapmatch.hmm.emission import angle_between, distance_score, heading_score, speed_weight
 from mapmatch.hmm.observations import between_kernel, travel_arrays
 from mapmatch.hmm.params import (
     P_CANDIDATE_MARGIN,
+    P_COURSE_PRUNE,
     P_MAX_CANDIDATES,
     P_MIN_LOG_TRANSITION,
     model_params,
@@ -103,6 +104,29 @@ def _best_places(rows, em, c_x, c_y, most):  # type: ignore[no-untyped-def]  # p
     return kept
 
 
+#: The course between a fix's neighbours says which way it drove when they lie at most this
+#: many seconds apart and at least this far (and 4 sigma) apart.
+COURSE_MAX_GAP_S = 10.0
+COURSE_MIN_M = 10.0
+
+
+@njit(cache=True, nogil=True)
+def _courses(used, ox, oy, otime, osigma, params):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """Bearing of the chord between each used observation's neighbours (NaN: none)."""
+    n = len(used)
+    course = np.full(n, np.nan)
+    if params[P_COURSE_PRUNE] <= 0:
+        return course
+    for i in range(1, n - 1):
+        p, q = used[i - 1], used[i + 1]
+        if not otime[q] - otime[p] <= COURSE_MAX_GAP_S:
+            continue
+        dx, dy = ox[q] - ox[p], oy[q] - oy[p]
+        if np.hypot(dx, dy) >= max(COURSE_MIN_M, 4.0 * osigma[used[i]]):
+            course[i] = np.degrees(np.arctan2(dx, dy)) % 360.0
+    return course
+
+
 @njit(cache=True, nogil=True)
 def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     routing, edge_speed, cands, used, cut_after, obs, travel, params
@@ -133,6 +157,7 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     ptr = np.zeros(n + 1, dtype=np.int64)
     margin = params[P_CANDIDATE_MARGIN]
     most = int(params[P_MAX_CANDIDATES])
+    course = _courses(used, ox, oy, otime, osigma, params)
     m = 0
     for i in range(n):
         u = used[i]
@@ -145,13 +170,22 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
                 e += heading_score(oheading[u], c_bear[r], weight, params)
             em_all[r - lo + m] = e
             best = max(best, e)
-        kept = m
-        for r in range(lo, hi):
-            e = em_all[r - lo + m]
-            if margin <= 0 or e >= best - margin:
-                rows[kept] = r
-                em_all[kept] = e
-                kept += 1
+        # an observation without a reported heading (none in the trace, or NaN) has its course;
+        # where that rules out every road it says nothing, and the margin alone decides
+        reported = has_heading and not np.isnan(oheading[u])
+        limit = params[P_COURSE_PRUNE] if not reported else 0.0
+        for course_limit in (limit, 0.0):
+            kept = m  # a first pass that kept nothing wrote nothing: the second reads the same
+            for r in range(lo, hi):
+                e = em_all[r - lo + m]
+                if margin <= 0 or e >= best - margin:
+                    if course_limit > 0 and angle_between(course[i], c_bear[r]) > course_limit:
+                        continue  # NaN (no course) compares False: kept
+                    rows[kept] = r
+                    em_all[kept] = e
+                    kept += 1
+            if kept > m or course_limit <= 0:
+                break
         if kept - m > most:
             kept = m + _best_places(rows[m:kept], em_all[m:kept], c_x, c_y, most)
         m = kept
