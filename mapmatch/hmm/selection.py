@@ -224,9 +224,24 @@ def _displaced(ptr, distance, fix_time, first, stop, x, y, sigma, travel, fix_xy
         if not len(travel_m) and attempt == 0:  # one end spike at most: the next is no spike
             mid = 0.5 * (fix_time[first] + fix_time[stop - 1])  # each observation's time
             fixes = (fix_xy[0], fix_xy[1], fix_time, first, stop)
-            spikes = _end_spikes(kept, x, y, sigma, mid, gap, fixes, params)
+            # the pace next to an end is read from the fixes that are no spikes themselves:
+            # a spike 40 m off within the last 5 s made the car look fast enough to have
+            # come from anywhere, and a last fix 54 m off at 4 m/s was kept
+            clean = kept[~found]
+            clean_gap = np.empty(max(len(clean) - 1, 0))
+            for k in range(len(clean) - 1):
+                clean_gap[k] = fix_time[first[clean[k + 1]]] - fix_time[stop[clean[k]] - 1]
+            spikes = _end_spikes(clean, x, y, sigma, mid, clean_gap, fixes, params)
             for end, inner in ((0, 1), (m - 1, m - 2)):
-                if m >= 3 and spikes[end] and not found[inner] and not backed[kept[end]]:
+                at = 0 if end == 0 else len(clean) - 1
+                if (
+                    m >= 3
+                    and len(clean) >= 3
+                    and not found[end]
+                    and spikes[at]
+                    and not found[inner]
+                    and not backed[kept[end]]
+                ):
                     found[end] = True
         if not found.any():
             break

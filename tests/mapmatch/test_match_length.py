@@ -453,6 +453,30 @@ def test_a_first_fix_thrown_onto_a_side_street_is_an_outlier(tmp_path: Path) -> 
     assert kept.matched_length_m - 15.0 < thrown.matched_length_m < kept.matched_length_m - 2.0
 
 
+def test_a_last_fix_thrown_onto_a_side_street_is_an_outlier_after_another_spike(
+    tmp_path: Path,
+) -> None:
+    # 1 Hz, positions only, 4 m/s towards a side street at 1000 m, a parallel street 40 m to
+    # the south. 6 s before the end a fix lands on the parallel street (5 s before the fix
+    # next to the end: as far back as the end test reads the pace), then the last fix is
+    # thrown 45 m up the side street. The pace is read without the first spike: through it
+    # the car looked fast enough to have come from anywhere, so the last fix stayed and the
+    # path went 45 m up the side street (the accuracy matrix's Liechtenstein 1s-5m trip 5)
+    ways = [(1, [(0, 0), (1000, 0), (2000, 0)], PRIMARY)]
+    ways += [(2, [(1000, 0), (1000, 200)], RESIDENTIAL), (3, [(0, -40), (1200, -40)], RESIDENTIAL)]
+    net = load(write_osm(tmp_path / "parallel.osm", ways))
+    x, _, _, t = drive([(880.0, 0.0), (990.0, 0.0)], speed_mps=4.0, interval_s=1.0)
+    y = np.random.default_rng(3).normal(0.0, 2.0, len(x))
+    kept = mapmatch.match(trace_of(x, y, time_s=t), net)
+    y[-7] = -40.0
+    x[-1], y[-1] = 1000.0, 45.0
+    thrown = mapmatch.match(trace_of(x, y, time_s=t), net)
+    assert thrown.points.outlier[-7]
+    assert thrown.points.outlier[-1]
+    assert thrown.way_ids() == [1]
+    assert thrown.matched_length_m < kept.matched_length_m + 2.0
+
+
 def test_a_turn_round_faster_than_a_car_can_turn_is_taken_out(
     data_dir: Path, cache_dir: Path
 ) -> None:
