@@ -634,13 +634,34 @@ def _repr(ops: IntArray, floats: FloatArray, floats_at: IntArray, step: int, row
     a, c = int(ops[step, 1]), int(ops[step, 3])
     digits, rounding = divmod(c, 4)
     at = int(floats_at[a]) + row
-    value = floats[at : at + 1]
     if rounding == _ROUNDING["python"]:
-        value = py_round(value, digits)
+        number = _py_round_one(float(floats[at]), digits)
     elif rounding == _ROUNDING["numpy"]:
-        value = np.round(value, digits)
-    number = float(value[0])
+        number = float(np.round(floats[at : at + 1], digits)[0])
+    else:
+        number = float(floats[at])
     return repr(number) if math.isfinite(number) else _NULL
+
+
+def _py_round_one(x: float, digits: int) -> float:
+    """
+    :func:`py_round` of one number, without arrays (a fifth of the time).
+
+    Examples
+    --------
+    >>> values = [2.675, -0.0004, 1700000200.9154978, -2.5e-3, 1e300, float("nan")]
+    >>> rounded = [_py_round_one(v, 3) for v in values]
+    >>> [repr(v) for v in rounded] == [repr(v) for v in py_round(np.array(values), 3).tolist()]
+    True
+    """
+    scale = 10.0**digits
+    y = x * scale
+    if not math.isfinite(x):
+        return x
+    ay = abs(y)
+    if ay >= 2.0**52 or abs(abs(y - math.trunc(y)) - 0.5) <= 1e-9 + 8.0 * _EPS * ay:
+        return round(x, digits)
+    return math.copysign(round(y) / scale, y)  # numpy's rint(y) / scale, the sign of zero kept
 
 
 def _text(texts: list[list[str]]) -> tuple[Any, IntArray, IntArray]:
