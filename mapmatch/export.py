@@ -338,6 +338,10 @@ def _segment_times(edges: EdgeTable, bounds: IntArray) -> tuple[FloatArray, Floa
     return start, end
 
 
+#: ``json.dumps(value, allow_nan=False, separators=(",", ":"))``, the encoder made once.
+_COMPACT = json.JSONEncoder(allow_nan=False, separators=(",", ":")).encode
+
+
 def _head(result: MatchResult) -> dict[str, Any]:
     return {
         "type": "FeatureCollection",
@@ -370,7 +374,7 @@ def geojson_bytes(result: MatchResult) -> bytes:
         ``distance_check``, ``breaks``, ``stats`` and ``features`` (the segments, then the
         points).
     """
-    head = json.dumps(_head(result), allow_nan=False, separators=(",", ":"))
+    head = _COMPACT(_head(result))
     features = chained_ascii(_feature_tables(result), schema="geojson-features")
     return b"".join((head[:-1].encode("ascii"), b',"features":[', features, b"]}"))
 
