@@ -15,16 +15,25 @@ Without times (a trace matched by distance only) every time is NaN.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba import njit
 
 if TYPE_CHECKING:
-    from mapmatch.result import MatchResult, Segment
-    from mapmatch.types import FloatArray, IntArray
+    from collections.abc import Sequence
 
-__all__ = ["EdgeTimes", "PathPositions", "edge_times", "path_positions"]
+    from mapmatch.result import MatchResult, Segment
+    from mapmatch.types import BoolArray, FloatArray, IntArray
+
+__all__ = [
+    "EdgeTimes",
+    "PathPositions",
+    "SegmentPaths",
+    "edge_times",
+    "path_positions",
+    "positions_and_times",
+]
 
 _EPS_M = 1e-6
 
@@ -49,16 +58,81 @@ class PathPositions:
 @dataclass(frozen=True, slots=True)
 class EdgeTimes:
     """
-    When one segment's edges were entered and left, epoch seconds (NaN without times).
+    When each stretch of the segments' paths was entered and left, epoch seconds.
 
-    ``start_m`` / ``end_m`` are the metres along the segment's path where each driven
-    stretch starts and ends.
+    One entry per stretch of :class:`SegmentPaths` (NaN without times). ``start_m`` /
+    ``end_m`` are the metres along its segment's path where each driven stretch starts
+    and ends.
     """
 
     start_m: FloatArray
     end_m: FloatArray
     entry_s: FloatArray
     exit_s: FloatArray
+
+
+@dataclass(frozen=True, slots=True)
+class SegmentPaths:
+    """
+    Every segment's path end to end: segment ``s`` has the stretches ``bounds[s]:bounds[s + 1]``.
+
+    Attributes
+    ----------
+    index, first, last
+        Each segment's index in the result, and its first and last fix.
+    bounds
+        Where each segment's stretches start (and the end), from 0.
+    edge, start_m, end_m
+        The stretches: network edge and the driven part of it (metres from its start).
+    """
+
+    index: IntArray
+    first: IntArray
+    last: IntArray
+    bounds: IntArray
+    edge: IntArray
+    start_m: FloatArray
+    end_m: FloatArray
+
+    @classmethod
+    def of(cls, segments: Sequence[Segment]) -> SegmentPaths:
+        """The paths of ``segments`` (one segment's arrays as they are, not copied)."""
+        if len(segments) == 1:
+            s = segments[0]
+            return cls(
+                index=np.array([s.index], dtype=np.int64),
+                first=np.array([s.first], dtype=np.int64),
+                last=np.array([s.last], dtype=np.int64),
+                bounds=np.array([0, len(s.edge)], dtype=np.int64),
+                edge=s.edge,
+                start_m=s.start_offset_m,
+                end_m=s.end_offset_m,
+            )
+        bounds = np.zeros(len(segments) + 1, dtype=np.int64)
+        np.cumsum([len(s.edge) for s in segments], out=bounds[1:])
+
+        def joined(parts: list[Any], dtype: type) -> Any:
+            return np.concatenate(parts, dtype=dtype) if parts else np.zeros(0, dtype=dtype)
+
+        return cls(
+            index=np.array([s.index for s in segments], dtype=np.int64),
+            first=np.array([s.first for s in segments], dtype=np.int64),
+            last=np.array([s.last for s in segments], dtype=np.int64),
+            bounds=bounds,
+            edge=joined([s.edge for s in segments], np.int64),
+            start_m=joined([s.start_offset_m for s in segments], np.float64),
+            end_m=joined([s.end_offset_m for s in segments], np.float64),
+        )
+
+    @property
+    def sizes(self) -> IntArray:
+        """How many stretches each segment has."""
+        sizes: IntArray = self.bounds[1:] - self.bounds[:-1]
+        return sizes
+
+    def arrays(self) -> tuple[IntArray, IntArray, IntArray, FloatArray, FloatArray]:
+        """``index``, ``bounds``, ``edge``, ``start_m`` and ``end_m``, as the kernels read them."""
+        return self.index, self.bounds, self.edge, self.start_m, self.end_m
 
 
 def _stretch_of(seg: Segment, edge: IntArray, offset_m: FloatArray) -> IntArray:
@@ -132,30 +206,56 @@ def _place_fixes(  # type: ignore[no-untyped-def]  # pragma: no cover
         along[f] = start[k] + into
 
 
-def path_positions(result: MatchResult) -> PathPositions:
-    """Each fix's edge in its segment's list and metres along the segment's path."""
-    p = result.points
-    n = len(p.time_s)
+@njit(cache=True, nogil=True)
+def _place_all(  # type: ignore[no-untyped-def]  # pragma: no cover
+    seg_index, bounds, seg_edge, start_m, end_m, point_segment, matched, edge, offset_m
+):
+    """Each fix's ``edge_index`` and ``along`` (``-1`` / NaN off every path), all segments."""
+    n = len(point_segment)
     edge_index = np.full(n, -1, dtype=np.int64)
     along = np.full(n, np.nan)
-    point_segment = np.asarray(p.segment, dtype=np.int64)
-    matched = np.asarray(p.matched, dtype=np.bool_)
-    edge = np.asarray(p.edge, dtype=np.int64)
-    offset = np.asarray(p.offset_m, dtype=np.float64)
-    for seg in result.segments:
+    for s in range(len(seg_index)):
+        lo, hi = bounds[s], bounds[s + 1]
         _place_fixes(
-            seg.index,
+            seg_index[s],
             point_segment,
             matched,
             edge,
-            offset,
-            np.asarray(seg.edge, dtype=np.int64),
-            np.asarray(seg.start_offset_m, dtype=np.float64),
-            np.asarray(seg.end_offset_m, dtype=np.float64),
+            offset_m,
+            seg_edge[lo:hi],
+            start_m[lo:hi],
+            end_m[lo:hi],
             edge_index,
             along,
         )
+    return edge_index, along
+
+
+def path_positions(result: MatchResult, paths: SegmentPaths | None = None) -> PathPositions:
+    """
+    Each fix's edge in its segment's list and metres along the segment's path.
+
+    Parameters
+    ----------
+    result
+        A match.
+    paths
+        Its segments' paths end to end, when already made (:meth:`SegmentPaths.of`).
+    """
+    paths = paths if paths is not None else SegmentPaths.of(result.segments)
+    edge_index, along = _place_all(*paths.arrays(), *_fixes(result))
     return PathPositions(edge_index=edge_index, along_m=along)
+
+
+def _fixes(result: MatchResult) -> tuple[IntArray, BoolArray, IntArray, FloatArray]:
+    """The fixes' segment, matched flag, edge and offset, as the kernels read them."""
+    p = result.points
+    return (
+        np.asarray(p.segment, dtype=np.int64),
+        np.asarray(p.matched, dtype=np.bool_),
+        np.asarray(p.edge, dtype=np.int64),
+        np.asarray(p.offset_m, dtype=np.float64),
+    )
 
 
 @njit(cache=True, nogil=True)
@@ -227,18 +327,75 @@ def _segment_times(  # type: ignore[no-untyped-def]  # pragma: no cover
     return start, end, entry, exit_
 
 
-def edge_times(result: MatchResult, positions: PathPositions) -> list[EdgeTimes]:
-    """Entry and exit time of every edge of every segment (see the module docstring)."""
-    p = result.points
-    matched = np.asarray(p.matched, dtype=np.bool_)
-    segment = np.asarray(p.segment, dtype=np.int64)
-    time_s = np.asarray(p.time_s, dtype=np.float64)
-    along = np.asarray(positions.along_m, dtype=np.float64)
-    out = []
-    for seg in result.segments:
-        driven = np.asarray(seg.driven_m, dtype=np.float64)
+@njit(cache=True, nogil=True)
+def _time_all(  # type: ignore[no-untyped-def]  # pragma: no cover
+    seg_index, bounds, start_m, end_m, point_segment, matched, time_s, along_m
+):
+    """:func:`_segment_times` of every segment: rows path start, path end, entry, exit."""
+    out = np.empty((4, len(start_m)))
+    for s in range(len(seg_index)):
+        lo, hi = bounds[s], bounds[s + 1]
+        driven = end_m[lo:hi] - start_m[lo:hi]
         start, end, entry, exit_ = _segment_times(
-            seg.index, segment, matched, time_s, along, driven
+            seg_index[s], point_segment, matched, time_s, along_m, driven
         )
-        out.append(EdgeTimes(start_m=start, end_m=end, entry_s=entry, exit_s=exit_))
+        out[0, lo:hi] = start
+        out[1, lo:hi] = end
+        out[2, lo:hi] = entry
+        out[3, lo:hi] = exit_
     return out
+
+
+@njit(cache=True, nogil=True)
+def _place_and_time_all(  # type: ignore[no-untyped-def]  # pragma: no cover
+    seg_index, bounds, seg_edge, start_m, end_m, point_segment, matched, edge, offset_m, time_s
+):
+    """:func:`_place_all` and :func:`_time_all` in one call."""
+    edge_index, along = _place_all(
+        seg_index, bounds, seg_edge, start_m, end_m, point_segment, matched, edge, offset_m
+    )
+    times = _time_all(seg_index, bounds, start_m, end_m, point_segment, matched, time_s, along)
+    return edge_index, along, times
+
+
+def _edge_times(times: FloatArray) -> EdgeTimes:
+    start, end, entry, exit_ = times
+    return EdgeTimes(start_m=start, end_m=end, entry_s=entry, exit_s=exit_)
+
+
+def edge_times(
+    result: MatchResult, positions: PathPositions, paths: SegmentPaths | None = None
+) -> EdgeTimes:
+    """
+    Entry and exit time of every edge of every segment (see the module docstring).
+
+    Parameters
+    ----------
+    result
+        A match.
+    positions
+        Its fixes' places on the path (:func:`path_positions`).
+    paths
+        Its segments' paths end to end, when already made (:meth:`SegmentPaths.of`).
+
+    Returns
+    -------
+    EdgeTimes
+        One entry per stretch of :class:`SegmentPaths`, segments in order.
+    """
+    paths = paths if paths is not None else SegmentPaths.of(result.segments)
+    seg_index, bounds, _, start_m, end_m = paths.arrays()
+    segment, matched, _, _ = _fixes(result)
+    time_s = np.asarray(result.points.time_s, dtype=np.float64)
+    along = np.asarray(positions.along_m, dtype=np.float64)
+    times = _time_all(seg_index, bounds, start_m, end_m, segment, matched, time_s, along)
+    return _edge_times(times)
+
+
+def positions_and_times(
+    result: MatchResult, paths: SegmentPaths
+) -> tuple[PathPositions, EdgeTimes]:
+    """:func:`path_positions` and :func:`edge_times` of ``result``, in one compiled call."""
+    time_s = np.asarray(result.points.time_s, dtype=np.float64)
+    edge_index, along, times = _place_and_time_all(*paths.arrays(), *_fixes(result), time_s)
+    return PathPositions(edge_index=edge_index, along_m=along), _edge_times(times)

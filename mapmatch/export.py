@@ -43,7 +43,15 @@ from mapmatch._jsontext import (
     Tuple,
     chained_ascii,
 )
-from mapmatch._timing import PathPositions, edge_times, path_positions
+from mapmatch._timing import (
+    EdgeTimes,
+    PathPositions,
+    SegmentPaths,
+    edge_times,
+    path_positions,
+    positions_and_times,
+)
+from mapmatch.result import EdgeAttributes
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -152,15 +160,16 @@ class EdgeTable:
     def mean_speed_kph(self) -> FloatArray:
         """Driven metres over seconds on each edge, km/h; NaN where no time passed."""
         duration = self.duration_s
-        # divided only where time passed (np.errstate costs more than the division)
-        speed: FloatArray = np.full(len(duration), np.nan)
-        np.divide(3.6 * self.driven_m, duration, out=speed, where=duration > 0)
+        # NaN where no time passed: no warning (np.errstate costs more than the division)
+        speed: FloatArray = 3.6 * self.driven_m / np.where(duration > 0, duration, np.nan)
         return speed
 
 
 def edge_table(result: MatchResult, positions: PathPositions | None = None) -> EdgeTable:
     """
     The columns of every driven edge of ``result`` (see :class:`EdgeTable`).
+
+    The arrays of a one-segment result may be the segment's own: read them, do not write.
 
     Parameters
     ----------
@@ -169,37 +178,38 @@ def edge_table(result: MatchResult, positions: PathPositions | None = None) -> E
     positions
         Its fixes' places on the path, when already known (:func:`path_positions`).
     """
-    positions = positions if positions is not None else path_positions(result)
-    times = edge_times(result, positions)
-    segs = result.segments
-    sizes = [len(s.edge) for s in segs]
-    attrs = [s.attributes for s in segs]
+    paths = SegmentPaths.of(result.segments)
+    if positions is None:
+        _, times = positions_and_times(result, paths)
+    else:
+        times = edge_times(result, positions, paths)
+    return _edge_table(result, paths, times)
 
-    def cat(values: list[Any], dtype: type) -> Any:
-        if len(values) == 1:  # one segment, the most common: one copy, no concatenation
-            return np.array(values[0], dtype=dtype)
-        return np.concatenate(values).astype(dtype) if values else np.zeros(0, dtype=dtype)
 
+def _edge_table(result: MatchResult, paths: SegmentPaths, times: EdgeTimes) -> EdgeTable:
+    """:func:`edge_table` of the result's paths and their times."""
+    attrs = EdgeAttributes.joined([s.attributes for s in result.segments])
+    sizes = paths.sizes
     return EdgeTable(
-        segment=cat([np.full(m, s.index) for s, m in zip(segs, sizes, strict=True)], np.int64),
-        order=cat([np.arange(m) for m in sizes], np.int64),
-        first_point=cat([np.full(m, s.first) for s, m in zip(segs, sizes, strict=True)], np.int64),
-        last_point=cat([np.full(m, s.last) for s, m in zip(segs, sizes, strict=True)], np.int64),
-        edge=cat([s.edge for s in segs], np.int64),
-        u=cat([a.u for a in attrs], np.int64),
-        v=cat([a.v for a in attrs], np.int64),
-        key=cat([a.key for a in attrs], np.int64),
-        way_id=cat([a.way_id for a in attrs], np.int64),
-        name=tuple(n for a in attrs for n in a.name),
-        road_class=tuple(c for a in attrs for c in a.road_class),
-        speed_limit_kph=cat([a.speed_limit_kph for a in attrs], np.float64),
-        length_m=cat([a.length_m for a in attrs], np.float64),
-        start_offset_m=cat([s.start_offset_m for s in segs], np.float64),
-        end_offset_m=cat([s.end_offset_m for s in segs], np.float64),
-        path_start_m=cat([t.start_m for t in times], np.float64),
-        path_end_m=cat([t.end_m for t in times], np.float64),
-        entry_time_s=cat([t.entry_s for t in times], np.float64),
-        exit_time_s=cat([t.exit_s for t in times], np.float64),
+        segment=paths.index.repeat(sizes),
+        order=np.arange(len(paths.edge), dtype=np.int64) - paths.bounds[:-1].repeat(sizes),
+        first_point=paths.first.repeat(sizes),
+        last_point=paths.last.repeat(sizes),
+        edge=paths.edge,
+        u=attrs.u,
+        v=attrs.v,
+        key=attrs.key,
+        way_id=attrs.way_id,
+        name=attrs.name,
+        road_class=attrs.road_class,
+        speed_limit_kph=attrs.speed_limit_kph,
+        length_m=attrs.length_m,
+        start_offset_m=paths.start_m,
+        end_offset_m=paths.end_m,
+        path_start_m=times.start_m,
+        path_end_m=times.end_m,
+        entry_time_s=times.entry_s,
+        exit_time_s=times.exit_s,
     )
 
 
@@ -279,33 +289,27 @@ def _paths(segs: list[Segment]) -> Items:
     lons = [s.lon if len(s.lon) != 1 else np.repeat(s.lon, 2) for s in segs]
     lats = [s.lat if len(s.lat) != 1 else np.repeat(s.lat, 2) for s in segs]
     bounds = np.fromiter(accumulate(map(len, lons), initial=0), np.int64, len(segs) + 1)
-    lon, lat = (np.concatenate(x) if x else np.zeros(0) for x in (lons, lats))
+    if len(segs) == 1:
+        lon, lat = lons[0], lats[0]
+    else:
+        lon, lat = (np.concatenate(x) if x else np.zeros(0) for x in (lons, lats))
     return Items(Tuple((_coordinates(lon), _coordinates(lat))), bounds, geometry="LineString")
 
 
-def _segment_table(result: MatchResult, edges: EdgeTable) -> Table:
+def _segment_table(result: MatchResult, paths: SegmentPaths, edges: EdgeTable) -> Table:
     """The ``segment`` Features, one row per segment."""
     segs = result.segments
     count = len(segs)
     lengths = np.array([s.length_m for s in segs], dtype=np.float64)
-    bounds = np.fromiter(accumulate((len(s.edge) for s in segs), initial=0), np.int64, count + 1)
-    start, end = _segment_times(edges, bounds)
+    start, end = _segment_times(edges, paths.bounds)
     properties = Table(
         count,
         [
             ("kind", Const("segment")),
-            ("segment", Ints(np.array([s.index for s in segs], dtype=np.int64))),
-            (
-                "point_range",
-                Tuple(
-                    (
-                        Ints(np.array([s.first for s in segs], dtype=np.int64)),
-                        Ints(np.array([s.last for s in segs], dtype=np.int64)),
-                    )
-                ),
-            ),
+            ("segment", Ints(paths.index)),
+            ("point_range", Tuple((Ints(paths.first), Ints(paths.last)))),
             ("length_m", _rounded(lengths, _METRES)),
-            ("edges", Items(_edge_json(edges), bounds)),
+            ("edges", Items(_edge_json(edges), paths.bounds)),
             ("start_time", _rounded(start, _SECONDS)),
             ("end_time", _rounded(end, _SECONDS)),
         ],
@@ -323,12 +327,19 @@ def _segment_table(result: MatchResult, edges: EdgeTable) -> Table:
 
 def _segment_times(edges: EdgeTable, bounds: IntArray) -> tuple[FloatArray, FloatArray]:
     """Each segment's first entry and last exit time (NaN without times or edges)."""
+    first, after = bounds[:-1], bounds[1:]
+    if (after > first).all():  # every segment has edges, as a match's do
+        return edges.entry_time_s[first], edges.exit_time_s[after - 1]
     start = np.full(len(bounds) - 1, np.nan)
     end = np.full(len(bounds) - 1, np.nan)
-    has = bounds[1:] > bounds[:-1]
-    start[has] = edges.entry_time_s[bounds[:-1][has]]
-    end[has] = edges.exit_time_s[bounds[1:][has] - 1]
+    has = after > first
+    start[has] = edges.entry_time_s[first[has]]
+    end[has] = edges.exit_time_s[after[has] - 1]
     return start, end
+
+
+#: ``json.dumps(value, allow_nan=False, separators=(",", ":"))``, the encoder made once.
+_COMPACT = json.JSONEncoder(allow_nan=False, separators=(",", ":")).encode
 
 
 def _head(result: MatchResult) -> dict[str, Any]:
@@ -363,7 +374,7 @@ def geojson_bytes(result: MatchResult) -> bytes:
         ``distance_check``, ``breaks``, ``stats`` and ``features`` (the segments, then the
         points).
     """
-    head = json.dumps(_head(result), allow_nan=False, separators=(",", ":"))
+    head = _COMPACT(_head(result))
     features = chained_ascii(_feature_tables(result), schema="geojson-features")
     return b"".join((head[:-1].encode("ascii"), b',"features":[', features, b"]}"))
 
@@ -377,9 +388,11 @@ def geojson_dict(result: MatchResult) -> dict[str, Any]:
 
 
 def _feature_tables(result: MatchResult) -> tuple[Table, Table]:
-    positions = path_positions(result)
-    edges = edge_table(result, positions)
-    return _segment_table(result, edges), _point_table(result, positions)
+    """The segment and the point Features of ``result``."""
+    paths = SegmentPaths.of(result.segments)
+    positions, times = positions_and_times(result, paths)
+    edges = _edge_table(result, paths, times)
+    return _segment_table(result, paths, edges), _point_table(result, positions)
 
 
 # --------------------------------------------------------------------------- tables

@@ -18,6 +18,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     import geopandas as gpd  # type: ignore[import-untyped]
     import numpy.typing as npt
     import pandas as pd
@@ -121,6 +123,26 @@ class EdgeAttributes:
             speed_limit_kph=np.asarray(a.edge_speed_mps[edge], dtype=np.float64) * 3.6,
             road_class=tuple(classes.tolist()),
             name=tuple(net.way_names.names_of(way)),
+        )
+
+    @classmethod
+    def joined(cls, parts: Sequence[EdgeAttributes]) -> EdgeAttributes:
+        """The attributes of several paths end to end (one path's as they are, not copied)."""
+        if len(parts) == 1:
+            return parts[0]
+
+        def cat(values: list[Any], dtype: type) -> Any:
+            return np.concatenate(values, dtype=dtype) if values else np.zeros(0, dtype=dtype)
+
+        return cls(
+            u=cat([a.u for a in parts], np.int64),
+            v=cat([a.v for a in parts], np.int64),
+            key=cat([a.key for a in parts], np.int64),
+            way_id=cat([a.way_id for a in parts], np.int64),
+            length_m=cat([a.length_m for a in parts], np.float64),
+            speed_limit_kph=cat([a.speed_limit_kph for a in parts], np.float64),
+            road_class=tuple(c for a in parts for c in a.road_class),
+            name=tuple(n for a in parts for n in a.name),
         )
 
 

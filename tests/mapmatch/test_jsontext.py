@@ -116,3 +116,11 @@ def test_a_chain_of_tables_is_their_rows_joined(cases: list[tuple[Any, ...]]) ->
     schema = "test-chain-" + "-".join(f"{case[3]}{case[4]}" for case in cases)
     assert jt.chained_ascii(tables, schema) == expected  # by the plan: the same
     assert jt.chained_ascii(tables, schema) == expected
+
+
+@settings(max_examples=500, deadline=None)
+@given(st.one_of(_FLOATS, st.floats(-1e16, 1e16)), st.sampled_from([0, 1, 2, 3, 4, 7]))
+def test_one_number_is_rounded_as_the_arrays_are(value: float, digits: int) -> None:
+    one = jt._py_round_one(value, digits)
+    many = float(jt.py_round(np.array([value]), digits)[0])
+    assert repr(one) == repr(many)
