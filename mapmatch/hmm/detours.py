@@ -166,7 +166,9 @@ def drop_detour_fixes(
         for drop in order:
             tries -= 1
             pair = used[[drop - 1, drop + 1]]
-            bridge = solve(net, obs, cands, pair, cuts(pair, missing_before), config)
+            bridge = solve(
+                net, obs, cands, pair, cuts(pair, missing_before), config, solution.course_deg
+            )
             width = bridge.log_transition.shape[-1]  # the pair's padding, within the trace's
             if not len(bridge.log_transition) or not width:
                 continue

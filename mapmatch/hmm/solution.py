@@ -20,7 +20,8 @@ class Solution:
 
     ``states`` is the chosen candidate rank of each used fix (-1: none); ``pieces`` are
     ``(start, stop)`` ranges of *used* positions; ``kinds`` the route kind of every padded
-    transition; ``routes`` the routes the transitions were scored on (their edges).
+    transition; ``routes`` the routes the transitions were scored on (their edges);
+    ``course_deg`` each observation's course the candidates were chosen by (NaN: none).
     """
 
     used: IntArray
@@ -32,6 +33,7 @@ class Solution:
     routes: EdgeRoutes
     log_emission: FloatArray
     log_transition: FloatArray
+    course_deg: FloatArray
 
     @property
     def breaks(self) -> list[int]:

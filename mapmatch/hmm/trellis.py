@@ -40,6 +40,7 @@ __all__ = [
     "isolated",
     "model_fixes",
     "observation_arrays",
+    "observation_courses",
     "repair_breaks",
     "solve",
     "solve_kernel",
@@ -112,24 +113,46 @@ COURSE_MIN_M = 10.0
 
 @njit(cache=True, nogil=True)
 def _courses(used, ox, oy, otime, osigma, params):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    """Bearing of the chord between each used observation's neighbours (NaN: none)."""
-    n = len(used)
-    course = np.full(n, np.nan)
+    """Bearing of the chord between each used observation's neighbours, per observation."""
+    course = np.full(len(ox), np.nan)
     if params[P_COURSE_PRUNE] <= 0:
         return course
-    for i in range(1, n - 1):
+    for i in range(1, len(used) - 1):
         p, q = used[i - 1], used[i + 1]
         if not otime[q] - otime[p] <= COURSE_MAX_GAP_S:
             continue
         dx, dy = ox[q] - ox[p], oy[q] - oy[p]
         if np.hypot(dx, dy) >= max(COURSE_MIN_M, 4.0 * osigma[used[i]]):
-            course[i] = np.degrees(np.arctan2(dx, dy)) % 360.0
+            course[used[i]] = np.degrees(np.arctan2(dx, dy)) % 360.0
     return course
+
+
+def observation_courses(obs: Observations, used: IntArray, config: MatchConfig) -> FloatArray:
+    """
+    The course of each observation: the bearing of the chord between its used neighbours.
+
+    NaN where it has none: an end, neighbours more than ``COURSE_MAX_GAP_S`` apart or closer
+    than ``COURSE_MIN_M`` and 4 sigma, an observation not in ``used``, or
+    ``course_prune_deg`` 0. The trellis drops the candidates that run more than
+    ``course_prune_deg`` from it where the observation has no reported heading.
+    """
+    f8 = np.float64
+    return np.asarray(
+        _courses(
+            np.ascontiguousarray(used, np.int64),
+            np.ascontiguousarray(obs.x, f8),
+            np.ascontiguousarray(obs.y, f8),
+            np.ascontiguousarray(obs.time_s, f8),
+            np.ascontiguousarray(obs.sigma_m, f8),
+            model_params(config),
+        ),
+        dtype=f8,
+    )
 
 
 @njit(cache=True, nogil=True)
 def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    routing, edge_speed, cands, used, cut_after, obs, travel, params
+    routing, edge_speed, cands, used, cut_after, obs, course, travel, params
 ):
     """
     :func:`solve` in one call, routes searched inside.
@@ -138,7 +161,8 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     transitions, the padded trellis, Viterbi and forward-backward. ``routing`` is
     :func:`~mapmatch.hmm.transition.route_inputs`, ``cands`` the seven arrays of every
     observation's :class:`Candidates`, ``obs`` the observations' ``(x, y, time, sigma,
-    speed, heading)`` (heading empty when unknown), ``travel`` their
+    speed, heading)`` (heading empty when unknown), ``course`` their
+    :func:`observation_courses`, ``travel`` their
     :func:`~mapmatch.hmm.observations.travel_arrays`. Last in what it returns: each step's
     route search bound (:func:`~mapmatch.hmm.routes.search_bound`), which tells whether the
     precomputed route table pays (:func:`~mapmatch.hmm.transition.table_pays`).
@@ -157,7 +181,6 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     ptr = np.zeros(n + 1, dtype=np.int64)
     margin = params[P_CANDIDATE_MARGIN]
     most = int(params[P_MAX_CANDIDATES])
-    course = _courses(used, ox, oy, otime, osigma, params)
     m = 0
     for i in range(n):
         u = used[i]
@@ -179,7 +202,7 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
             for r in range(lo, hi):
                 e = em_all[r - lo + m]
                 if margin <= 0 or e >= best - margin:
-                    if course_limit > 0 and angle_between(course[i], c_bear[r]) > course_limit:
+                    if course_limit > 0 and angle_between(course[u], c_bear[r]) > course_limit:
                         continue  # NaN (no course) compares False: kept
                     rows[kept] = r
                     em_all[kept] = e
@@ -277,9 +300,19 @@ def solve(
     used: IntArray,
     cut_after: BoolArray,
     config: MatchConfig,
+    course: FloatArray | None = None,
 ) -> Solution:
-    """Score the trellis over the ``used`` fixes and find the best sequence."""
+    """
+    Score the trellis over the ``used`` fixes and find the best sequence.
+
+    ``course`` is each observation's course (:func:`observation_courses`), worked out from
+    ``used`` when not given: a trellis over some of a solution's observations (the detour
+    search's bridges) is given the solution's, so that its observations keep the same
+    candidates.
+    """
     c = all_cands
+    if course is None:
+        course = observation_courses(fixes, used, config)
     out = solve_kernel(
         route_inputs(net),
         net.arrays.edge_speed_mps,
@@ -287,6 +320,7 @@ def solve(
         np.ascontiguousarray(used, dtype=np.int64),
         np.ascontiguousarray(cut_after, dtype=np.bool_),
         observation_arrays(fixes),
+        course,
         travel_arrays(fixes.travel),
         model_params(config),
     )
@@ -297,7 +331,7 @@ def solve(
     cands = Candidates(*cand_arrays)
     pieces = list(zip(piece_lo.tolist(), piece_hi.tolist(), strict=True))
     routes = routes_found(net, ea, eb, found)
-    return Solution(used, cands, states, pieces, post, kinds, routes, em_pad, tr_pad)
+    return Solution(used, cands, states, pieces, post, kinds, routes, em_pad, tr_pad, course)
 
 
 def observation_arrays(obs: Observations) -> tuple[FloatArray, ...]:

@@ -10,25 +10,25 @@ import mapmatch
 from mapmatch.evaluation.accuracy.conditions import condition_config
 from mapmatch.evaluation.simulate import simulate_trips, strip_to_class
 from mapmatch.hmm.fixes import fixes_of, observe
-from mapmatch.hmm.params import model_params
 from mapmatch.hmm.selection import find_displaced
-from mapmatch.hmm.trellis import _courses, model_fixes, solve
+from mapmatch.hmm.trellis import model_fixes, solve
 
 if TYPE_CHECKING:
     import roadnets
+    from mapmatch.hmm.candidates import Candidates
     from mapmatch.hmm.observations import Observations
     from mapmatch.hmm.solution import Solution
 
 
 def _solved(
     net: roadnets.RoadNetwork, trace: mapmatch.Trace, config: mapmatch.MatchConfig
-) -> tuple[Observations, Solution]:
+) -> tuple[Observations, Candidates, Solution]:
     x, y = net.project(trace.lon, trace.lat)
     fixes = fixes_of(trace, x, y, config)
     obs, cands = observe(net, fixes, config)
     outlier = find_displaced(fixes, obs, cands, config)
     used, _, cut_after = model_fixes(cands, outlier, fixes.segment_starts, obs.first)
-    return obs, solve(net, obs, cands, used, cut_after, config)
+    return obs, cands, solve(net, obs, cands, used, cut_after, config)
 
 
 def _trips(net: roadnets.RoadNetwork, count: int = 3) -> list[mapmatch.Trace]:
@@ -40,16 +40,15 @@ def test_no_kept_candidate_runs_against_the_course(default_net: roadnets.RoadNet
     config = mapmatch.MatchConfig()
     pruned = 0
     for trace in _trips(default_net):
-        obs, solution = _solved(default_net, trace, config)
-        used = solution.used
-        course = _courses(used, obs.x, obs.y, obs.time_s, obs.sigma_m, model_params(config))
+        _, _, solution = _solved(default_net, trace, config)
+        course = solution.course_deg[solution.used]
         assert np.isfinite(course).mean() > 0.5  # a drive at 1 s has a course nearly throughout
         c = solution.cands
         for t in np.flatnonzero(np.isfinite(course)):
             bearings = c.bearing_deg[c.ptr[t] : c.ptr[t + 1]]
             off = np.abs((bearings - course[t] + 180.0) % 360.0 - 180.0)
             assert (off <= config.course_prune_deg).all()
-        _, unpruned = _solved(default_net, trace, config.replace({"course_prune_deg": 0.0}))
+        _, _, unpruned = _solved(default_net, trace, config.replace({"course_prune_deg": 0.0}))
         pruned += len(unpruned.cands) - len(c)
     assert pruned > 0  # the two-way roads' wrong directions were there to drop
 
@@ -80,3 +79,26 @@ def test_a_heading_column_of_nans_is_no_heading(default_net: roadnets.RoadNetwor
     )
     plain, blank = mapmatch.match(trace, default_net), mapmatch.match(nans, default_net)
     np.testing.assert_array_equal(blank.points.confidence, plain.points.confidence)
+
+
+def test_a_trellis_over_some_observations_keeps_their_candidates(
+    default_net: roadnets.RoadNetwork,
+) -> None:
+    # the detour search bridges two observations of a solution with a trellis of their own
+    # and reads its scores by the solution's candidate ranks: given the solution's courses,
+    # the bridge's observations keep the candidates they had (in a trellis of their own
+    # both are ends, with no course)
+    config = mapmatch.MatchConfig()
+    obs, all_cands, solution = _solved(default_net, _trips(default_net, count=1)[0], config)
+    c, used = solution.cands, solution.used
+    never = np.zeros(2, dtype=bool)
+    differs = 0
+    for t in range(1, len(used) - 1, 5):
+        pair = used[[t - 1, t + 1]]
+        bridge = solve(default_net, obs, all_cands, pair, never, config, solution.course_deg)
+        for k, at in enumerate((t - 1, t + 1)):
+            kept = c.edge[c.ptr[at] : c.ptr[at + 1]].tolist()
+            assert bridge.cands.edge[bridge.cands.ptr[k] : bridge.cands.ptr[k + 1]].tolist() == kept
+        own = solve(default_net, obs, all_cands, pair, never, config)
+        differs += len(own.cands) != len(bridge.cands)
+    assert differs > 0  # without the solution's courses the bridge's candidates differ
