@@ -276,15 +276,16 @@ def drop_detour_fixes(
         # drops its transition with nothing to bridge it (a 30 s step round a hairpin costs
         # 20 nats on the noise-free truth), and the end tests judge them
         pieces = np.asarray(solution.pieces, dtype=np.int64).reshape(-1, 2)
+        f8, i8 = np.float64, np.int64  # one compiled signature (no copies: they are so)
         tried, drops, bounds, bests, ahead, behind = _tries_kernel(
-            solution.states,
-            solution.log_emission,
-            solution.log_transition,
+            np.ascontiguousarray(solution.states, i8),
+            np.ascontiguousarray(solution.log_emission, f8),
+            np.ascontiguousarray(solution.log_transition, f8),
             np.ascontiguousarray(pieces[:, 0]),
             np.ascontiguousarray(pieces[:, 1]),
-            used,
-            obs.x,
-            obs.y,
+            np.ascontiguousarray(used, i8),
+            np.ascontiguousarray(obs.x, f8),
+            np.ascontiguousarray(obs.y, f8),
             float(nats),
             int(tries),
         )
