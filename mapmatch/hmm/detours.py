@@ -10,7 +10,11 @@ matched 49 % too long, two transitions of -33 and -48 nats on its path where the
 less than 4. So where the solved path holds a transition below ``-detour_outlier_nats``,
 the inner observations within ``_WINDOW`` of it are tried, those that stick out most from
 their neighbours first: each is bridged (its neighbours' two-observation trellis) and the
-best path through the bridge scored from the solved trellis. The best of them is left out
+best path through the bridge scored from the solved trellis; a transition scores at most 0,
+which bounds what a fix can gain before any route is searched, and only the fixes whose
+bound could make them the best are bridged (:func:`_tries_kernel`; on 40 traces each of
+13, 30 and 100 fixes at 15 and 30 s of ``bench_fixed_cost`` on Krems, Andorra, Monaco and
+Helsinki, 447 of 648 tries need no bridge by the bound alone). The best of them is left out
 and the trace solved again; that solution is taken when its path scores more than
 ``detour_outlier_nats`` better (the left-out fix's emission and both its transitions
 against the one transition that bridges it), and the search goes on for a second such fix.
@@ -24,11 +28,12 @@ output (placed on the path when that lies within its search radius, else unmatch
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numba import njit
 
-from mapmatch.hmm.trellis import cuts, solve
+from mapmatch.hmm.trellis import bridge_transitions, cuts, solve, trace_inputs
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -70,6 +75,46 @@ def _inside(solution: Solution) -> BoolArray:
     return inside
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _max_of(v, best):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """``max`` as numpy's reductions take it: a NaN wins."""
+    return v if v > best or np.isnan(v) or np.isnan(best) else best
+
+
+@njit(cache=True, nogil=True)
+def _best_paths_kernel(em, tr, piece_lo, piece_hi):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """
+    :func:`_best_paths` over arrays: the same sums in the same order, the same maxima.
+
+    Plain loops (row assignments and 2-d ``np.full`` cost seconds of compiling).
+    """
+    n, width = em.shape
+    ahead = np.empty((n, width))
+    behind = np.empty((n, width))
+    for t in range(n):
+        for k in range(width):
+            ahead[t, k] = -np.inf
+            behind[t, k] = -np.inf
+    for p in range(len(piece_lo)):
+        start, stop = piece_lo[p], piece_hi[p]
+        for k in range(width):
+            ahead[start, k] = em[start, k]
+            behind[stop - 1, k] = 0.0
+        for t in range(start + 1, stop):
+            for j in range(width):
+                best = -np.inf
+                for i in range(width):
+                    best = _max_of(ahead[t - 1, i] + tr[t - 1, i, j], best)
+                ahead[t, j] = em[t, j] + best
+        for t in range(stop - 2, start - 1, -1):
+            for i in range(width):
+                best = -np.inf
+                for j in range(width):
+                    best = _max_of(tr[t, i, j] + (em[t + 1, j] + behind[t + 1, j]), best)
+                behind[t, i] = best
+    return ahead, behind
+
+
 def _best_paths(solution: Solution) -> tuple[FloatArray, FloatArray]:
     """
     Per used position and candidate, the best path score up to it and on after it.
@@ -77,26 +122,118 @@ def _best_paths(solution: Solution) -> tuple[FloatArray, FloatArray]:
     ``ahead[t, k]``: the best score of a path from its piece's start that ends in candidate
     ``k`` of position ``t`` (its emission included); ``behind[t, k]``: the best score of
     the rest of the piece after it (emission of ``t`` excluded). Max-product over the solved
-    trellis' emissions and transitions.
+    trellis' emissions and transitions (compiled: :func:`_best_paths_kernel`).
     """
-    em, tr = solution.log_emission, solution.log_transition
-    ahead, behind = np.full(em.shape, -np.inf), np.full(em.shape, -np.inf)
-    for start, stop in solution.pieces:
-        ahead[start] = em[start]
-        for t in range(start + 1, stop):
-            ahead[t] = em[t] + (ahead[t - 1][:, None] + tr[t - 1]).max(axis=0)
-        behind[stop - 1] = 0.0
-        for t in range(stop - 2, start - 1, -1):
-            behind[t] = (tr[t] + (em[t + 1] + behind[t + 1])[None, :]).max(axis=1)
+    bounds = np.asarray(solution.pieces, dtype=np.int64).reshape(-1, 2)
+    ahead, behind = _best_paths_kernel(
+        np.ascontiguousarray(solution.log_emission, dtype=np.float64),
+        np.ascontiguousarray(solution.log_transition, dtype=np.float64),
+        np.ascontiguousarray(bounds[:, 0]),
+        np.ascontiguousarray(bounds[:, 1]),
+    )
     return ahead, behind
 
 
-def _costly_steps(solution: Solution, floor: float) -> IntArray:
-    """Used positions ``t`` whose chosen transition from ``t - 1`` scores below ``floor``."""
-    states = solution.states
-    steps = np.arange(1, len(solution.used))
-    scores = solution.log_transition[steps - 1, states[steps - 1], states[steps]]
-    return np.asarray(steps[_inside(solution) & (scores < floor)], dtype=np.int64)
+@njit(cache=True, nogil=True)
+def _tries_kernel(states, em, tr, piece_lo, piece_hi, used, ox, oy, nats, tries):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """
+    The fixes one round of :func:`drop_detour_fixes` tries, and a bound of what each gains.
+
+    The steps whose chosen transition scores below ``-nats`` (inside a piece); the inner
+    fixes of the pieces within :data:`_WINDOW` of one; the ``tries`` of them that stick out
+    most from their neighbours (ties: the earlier first). Of those, the ones whose bound
+    exceeds ``nats``: leaving a fix out drops its emission and its two transitions for one
+    that bridges its neighbours, and a transition scores at most 0 (a -gap / beta less
+    penalties, :func:`~mapmatch.hmm.transition.transition_score`), so the best path through
+    the bridge scores at most the best path up to the left neighbour plus the best from the
+    right neighbour on; rounding is monotonic, so the gain computed from a bridge is at most
+    that bound computed the same way (NaN: no bound, ``inf``).
+
+    Returns the number of fixes tried (-1: no costly step, or no inner fix near one: the
+    search ends), the positions kept, their bounds and their pieces' best scores (largest
+    bound first), and :func:`_best_paths`' ``ahead`` and ``behind`` (empty when not
+    needed). ``tests/mapmatch/test_detours.py`` holds the premise (no transition above 0)
+    and compares the search with one that bridges every try.
+    """
+    n, width = em.shape
+    none = np.empty(0, dtype=np.int64)
+    inside = np.ones(max(n - 1, 0), dtype=np.bool_)
+    for p in range(1, len(piece_lo)):
+        inside[piece_lo[p] - 1] = False
+    costly = np.empty(n, dtype=np.int64)
+    m = 0
+    for t in range(1, n):
+        i, j = states[t - 1], states[t]
+        # a position off every piece has state -1, which numpy's indexing reads from the end
+        score = tr[t - 1, i + width if i < 0 else i, j + width if j < 0 else j]
+        if inside[t - 1] and score < -nats:
+            costly[m] = t
+            m += 1
+    if m == 0:
+        return -1, none, np.empty(0), np.empty(0), em[:0], em[:0]
+    # the inner fixes of the pieces within _WINDOW of a costly step, and how far each sticks
+    # out from its neighbours
+    piece = np.full(n, -1, dtype=np.int64)
+    for p in range(len(piece_lo)):
+        for t in range(piece_lo[p] + 1, piece_hi[p] - 1):
+            piece[t] = p
+    positions = np.empty(n, dtype=np.int64)
+    sticks_out = np.empty(n)
+    found = 0
+    for t in range(n):
+        if piece[t] < 0:
+            continue
+        near = False
+        for c in range(m):
+            near = near or abs(t - costly[c]) <= _WINDOW
+        if not near:
+            continue
+        a, b, c = used[t - 1], used[t], used[t + 1]
+        mid_x = 0.5 * (ox[a] + ox[c])
+        mid_y = 0.5 * (oy[a] + oy[c])
+        positions[found] = t
+        sticks_out[found] = np.hypot(ox[b] - mid_x, oy[b] - mid_y)
+        found += 1
+    if found == 0:  # no inner fix near: nothing to try
+        return -1, none, np.empty(0), np.empty(0), em[:0], em[:0]
+    # the `tries` that stick out most, as a stable sort on -sticks_out orders them (the
+    # earlier of equals first, NaN last)
+    for q in range(found):
+        sticks_out[q] = np.inf if np.isnan(sticks_out[q]) else -sticks_out[q]
+    tried = min(found, max(tries, 0))
+    for q in range(tried):
+        top = q
+        for r in range(q + 1, found):
+            if sticks_out[r] < sticks_out[top]:
+                top = r
+        if top != q:  # move it to q, keeping the order of those between
+            t, v = positions[top], sticks_out[top]
+            for r in range(top, q, -1):
+                positions[r], sticks_out[r] = positions[r - 1], sticks_out[r - 1]
+            positions[q], sticks_out[q] = t, v
+    ahead, behind = _best_paths_kernel(em, tr, piece_lo, piece_hi)
+    drops = np.empty(tried, dtype=np.int64)
+    bounds = np.empty(tried)
+    bests = np.empty(tried)
+    k = 0
+    for q in range(tried):
+        drop = positions[q]
+        best, to_left, to_right = -np.inf, -np.inf, -np.inf
+        for j in range(width):
+            best = _max_of(ahead[piece_hi[piece[drop]] - 1, j], best)
+            to_left = _max_of(ahead[drop - 1, j], to_left)
+            to_right = _max_of(em[drop + 1, j] + behind[drop + 1, j], to_right)
+        bound = (to_left + to_right) - best
+        if np.isnan(bound):
+            bound = np.inf
+        if bound > nats:  # kept largest bound first
+            r = k
+            while r > 0 and bounds[r - 1] < bound:
+                drops[r], bounds[r], bests[r] = drops[r - 1], bounds[r - 1], bests[r - 1]
+                r -= 1
+            drops[r], bounds[r], bests[r] = drop, bound, best
+            k += 1
+    return tried, drops[:k], bounds[:k], bests[:k], ahead, behind
 
 
 def drop_detour_fixes(
@@ -129,58 +266,62 @@ def drop_detour_fixes(
         ``None`` when no transition is that costly or leaving a fix out does not pay.
     """
     nats, tries = config.detour_outlier_nats, config.max_detour_tries
+    inputs: tuple[Any, ...] | None = None  # the trace's arrays, once a bridge needs them
     left_out: list[int] = []
     while tries > 0:
-        costly = _costly_steps(solution, -nats)
-        if not len(costly):
-            break
         used = solution.used
-        # a piece's ends are left alone: leaving one out drops its transition with nothing
-        # to bridge it (a 30 s step round a hairpin costs 20 nats on the noise-free truth),
-        # and the end tests judge them
-        piece = np.empty(len(used), dtype=np.int64)
-        inner = np.ones(len(used), dtype=bool)
-        for k, (start, stop) in enumerate(solution.pieces):
-            piece[start:stop] = k
-            inner[[start, stop - 1]] = False
-        positions = np.flatnonzero(inner)
-        if not len(positions):
+        # the fixes within _WINDOW of a transition below -nats, those that stick out most
+        # from their neighbours first: the fix that forced it is thrown off, and the detour
+        # can start and end far from it. A piece's ends are left alone: leaving one out
+        # drops its transition with nothing to bridge it (a 30 s step round a hairpin costs
+        # 20 nats on the noise-free truth), and the end tests judge them
+        pieces = np.asarray(solution.pieces, dtype=np.int64).reshape(-1, 2)
+        f8, i8 = np.float64, np.int64  # one compiled signature (no copies: they are so)
+        tried, drops, bounds, bests, ahead, behind = _tries_kernel(
+            np.ascontiguousarray(solution.states, i8),
+            np.ascontiguousarray(solution.log_emission, f8),
+            np.ascontiguousarray(solution.log_transition, f8),
+            np.ascontiguousarray(pieces[:, 0]),
+            np.ascontiguousarray(pieces[:, 1]),
+            np.ascontiguousarray(used, i8),
+            np.ascontiguousarray(obs.x, f8),
+            np.ascontiguousarray(obs.y, f8),
+            float(nats),
+            int(tries),
+        )
+        if tried < 0:
             break
-        # within the detour, the fixes that stick out most from their neighbours first: the
-        # fix that forced it is thrown off, and the detour can start and end far from it
-        reach = np.abs(positions[:, None] - costly[None, :]).min(axis=1)
-        positions = positions[reach <= _WINDOW]
-        xs, ys = obs.x[used], obs.y[used]
-        mid_x = 0.5 * (xs[positions - 1] + xs[positions + 1])
-        mid_y = 0.5 * (ys[positions - 1] + ys[positions + 1])
-        sticks_out = np.hypot(xs[positions] - mid_x, ys[positions] - mid_y)
-        order = positions[np.argsort(-sticks_out, kind="stable")][:tries]
+        tries -= tried
         # each try bridges the fix's neighbours (a two-observation trellis) and scores the
         # best path through that bridge from the solved trellis, forwards and backwards:
         # solving the stretch around every fix with and without it cost 1.6x the whole
         # match on Helsinki 15 s. The trellis alone knows no arrival rule (a fix held behind
         # a junction stands on the road the car came by), so it only ranks the fixes, and
-        # the best is solved whole (solving the best two found no more on the matrix)
-        ahead, behind = _best_paths(solution)
+        # the best is solved whole (solving the best two found no more on the matrix). A
+        # fix whose bound (_tries_kernel) cannot beat nats or the best gain found is not
+        # bridged: it could not be the one chosen
         estimates: list[tuple[float, int]] = []
-        for drop in order:
-            tries -= 1
+        top = nats
+        for drop, bound, best in zip(drops.tolist(), bounds.tolist(), bests.tolist(), strict=True):
+            if bound < top:
+                break  # bounds come largest first: none of the rest can be chosen
+            inputs = inputs or trace_inputs(obs, cands, config)
             pair = used[[drop - 1, drop + 1]]
-            bridge = solve(
-                net, obs, cands, pair, cuts(pair, missing_before), config, solution.course_deg
+            bridge = bridge_transitions(
+                net, inputs, pair, cuts(pair, missing_before), solution.course_deg
             )
-            width = bridge.log_transition.shape[-1]  # the pair's padding, within the trace's
-            if not len(bridge.log_transition) or not width:
+            width = bridge.shape[-1]  # the pair's padding, within the trace's
+            if not len(bridge) or not width:
                 continue
             through = (
                 ahead[drop - 1, :width, None]
-                + bridge.log_transition[0]
+                + bridge[0]
                 + (solution.log_emission[drop + 1, :width] + behind[drop + 1, :width])[None, :]
             )
-            _, stop = solution.pieces[piece[drop]]
-            gain = float(through.max()) - float(ahead[stop - 1].max())
+            gain = float(through.max()) - best
             if gain > nats:
-                estimates.append((gain, int(drop)))
+                estimates.append((gain, drop))
+                top = max(top, gain)
         if not estimates:
             break
         _, drop = max(estimates)

@@ -8,7 +8,7 @@ the observation at a break (a two-observation trellis per try), then solves once
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba import njit
@@ -36,6 +36,7 @@ if TYPE_CHECKING:
     from roadnets import RoadNetwork
 
 __all__ = [
+    "bridge_transitions",
     "cuts",
     "isolated",
     "model_fixes",
@@ -44,6 +45,7 @@ __all__ = [
     "repair_breaks",
     "solve",
     "solve_kernel",
+    "trace_inputs",
 ]
 
 
@@ -307,31 +309,91 @@ def solve(
 
     ``course`` is each observation's course (:func:`observation_courses`), worked out from
     ``used`` when not given: a trellis over some of a solution's observations (the detour
-    search's bridges) is given the solution's, so that its observations keep the same
-    candidates.
+    search's bridges, :func:`bridge_transitions`) is given the solution's, so that its
+    observations keep the same candidates.
     """
-    c = all_cands
     if course is None:
         course = observation_courses(fixes, used, config)
-    out = solve_kernel(
-        route_inputs(net),
-        net.arrays.edge_speed_mps,
-        (c.ptr, c.edge, c.offset_m, c.distance_m, c.x, c.y, c.bearing_deg),
-        np.ascontiguousarray(used, dtype=np.int64),
-        np.ascontiguousarray(cut_after, dtype=np.bool_),
-        observation_arrays(fixes),
-        course,
-        travel_arrays(fixes.travel),
-        model_params(config),
-    )
+    out = _solve_arrays(net, trace_inputs(fixes, all_cands, config), used, cut_after, course)
     cand_arrays, states, piece_lo, piece_hi, post, kinds, em_pad, tr_pad, found, ea, eb = out[:11]
-    bounds = out[11]  # each step's route search bound
-    if not net.route_table_requested and table_pays(bounds):
-        net.request_route_table()  # a sparse trace: the next ones may use the table
     cands = Candidates(*cand_arrays)
     pieces = list(zip(piece_lo.tolist(), piece_hi.tolist(), strict=True))
     routes = routes_found(net, ea, eb, found)
     return Solution(used, cands, states, pieces, post, kinds, routes, em_pad, tr_pad, course)
+
+
+def trace_inputs(
+    fixes: Observations, all_cands: Candidates, config: MatchConfig
+) -> tuple[Any, ...]:
+    """
+    What :func:`solve_kernel` reads of a trace whichever of its fixes are used.
+
+    ``(cands, obs, travel, params)``: every observation's candidate arrays,
+    :func:`observation_arrays`, :func:`~mapmatch.hmm.observations.travel_arrays` and
+    :func:`~mapmatch.hmm.params.model_params`; computed once, they serve every solve of
+    the trace (:func:`bridge_transitions`).
+    """
+    c = all_cands
+    return (
+        (c.ptr, c.edge, c.offset_m, c.distance_m, c.x, c.y, c.bearing_deg),
+        observation_arrays(fixes),
+        travel_arrays(fixes.travel),
+        model_params(config),
+    )
+
+
+def _solve_arrays(
+    net: RoadNetwork,
+    inputs: tuple[Any, ...],
+    used: IntArray,
+    cut_after: BoolArray,
+    course: FloatArray,
+) -> tuple[Any, ...]:
+    """
+    :func:`solve_kernel` over the ``used`` fixes of a trace (:func:`trace_inputs`).
+
+    ``course``: each observation's course the candidates are chosen by
+    (:func:`observation_courses`).
+
+    A sparse trace (its steps' route search bounds) asks the network for its route table,
+    which the next traces may use.
+    """
+    cand_arrays, obs, travel, params = inputs
+    out: tuple[Any, ...] = solve_kernel(
+        route_inputs(net),  # read each time: the table may have come meanwhile
+        net.arrays.edge_speed_mps,
+        cand_arrays,
+        np.ascontiguousarray(used, dtype=np.int64),
+        np.ascontiguousarray(cut_after, dtype=np.bool_),
+        obs,
+        course,
+        travel,
+        params,
+    )
+    bounds = out[11]  # each step's route search bound
+    if not net.route_table_requested and table_pays(bounds):
+        net.request_route_table()  # a sparse trace: the next ones may use the table
+    return out
+
+
+def bridge_transitions(
+    net: RoadNetwork,
+    inputs: tuple[Any, ...],
+    pair: IntArray,
+    cut_after: BoolArray,
+    course: FloatArray,
+) -> FloatArray:
+    """
+    The log transitions of the two-fix trellis over ``pair``: what :func:`solve` scores.
+
+    ``inputs`` are the trace's :func:`trace_inputs`, ``course`` the courses of the solution
+    the pair belongs to (:attr:`Solution.course_deg`: the pair's observations keep that
+    solution's candidates and ranks); the result has shape ``(1, width, width)`` (the
+    pair's candidates by rank, padded with ``-inf``). Spares the rest of a
+    :class:`Solution`: its candidates, its routes' edges.
+    """
+    tr_pad: FloatArray = _solve_arrays(net, inputs, pair, cut_after, course)[7]
+    return tr_pad
 
 
 def observation_arrays(obs: Observations) -> tuple[FloatArray, ...]:
