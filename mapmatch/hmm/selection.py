@@ -179,6 +179,15 @@ def _off_road(nearest, sigma, gaps, params):  # type: ignore[no-untyped-def]  # 
     return out
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _gaps(points, first, stop, fix_time):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """Seconds from each of the observations ``points`` to the next: last fix to first fix."""
+    gaps = np.empty(max(len(points) - 1, 0))
+    for k in range(len(points) - 1):
+        gaps[k] = fix_time[first[points[k + 1]]] - fix_time[stop[points[k]] - 1]
+    return gaps
+
+
 @njit(cache=True, nogil=True)
 def _displaced(ptr, distance, fix_time, first, stop, x, y, sigma, travel, fix_xy, params):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
@@ -195,9 +204,7 @@ def _displaced(ptr, distance, fix_time, first, stop, x, y, sigma, travel, fix_xy
             nearest[k] = distance[ptr[k]]  # rows of a fix are nearest first
             near[n_near] = k
             n_near += 1
-    gaps = np.empty(max(n - 1, 0))
-    for k in range(n - 1):
-        gaps[k] = fix_time[first[k + 1]] - fix_time[stop[k] - 1]
+    gaps = _gaps(np.arange(n), first, stop, fix_time)
     outlier = _off_road(nearest, sigma, gaps, params)
     # a stop's observation, several fixes that agree and lie on a road, is where the car
     # was, not a stray: at a dead end's end a car that turns back makes the same spike
@@ -213,9 +220,7 @@ def _displaced(ptr, distance, fix_time, first, stop, x, y, sigma, travel, fix_xy
                 kept[m] = near[k]
                 m += 1
         kept = kept[:m]
-        gap = np.empty(max(m - 1, 0))
-        for k in range(m - 1):
-            gap[k] = fix_time[first[kept[k + 1]]] - fix_time[stop[kept[k]] - 1]
+        gap = _gaps(kept, first, stop, fix_time)
         if len(speed_m) or len(odometer):
             travel_m, slack = between_kernel(kept, odometer, speed_m, slack_m, lo, hi)
         else:
@@ -228,15 +233,12 @@ def _displaced(ptr, distance, fix_time, first, stop, x, y, sigma, travel, fix_xy
             # a spike 40 m off within the last 5 s made the car look fast enough to have
             # come from anywhere, and a last fix 54 m off at 4 m/s was kept
             clean = kept[~found]
-            clean_gap = np.empty(max(len(clean) - 1, 0))
-            for k in range(len(clean) - 1):
-                clean_gap[k] = fix_time[first[clean[k + 1]]] - fix_time[stop[clean[k]] - 1]
+            clean_gap = _gaps(clean, first, stop, fix_time)
             spikes = _end_spikes(clean, x, y, sigma, mid, clean_gap, fixes, params)
             for end, inner in ((0, 1), (m - 1, m - 2)):
                 at = 0 if end == 0 else len(clean) - 1
                 if (
-                    m >= 3
-                    and len(clean) >= 3
+                    len(clean) >= 3  # and so m >= 3: clean is kept less the spikes
                     and not found[end]
                     and spikes[at]
                     and not found[inner]
