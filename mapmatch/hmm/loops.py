@@ -230,6 +230,29 @@ def _time_to_cover(distance, speed, accel):  # type: ignore[no-untyped-def]  # p
 
 
 @njit(cache=True, nogil=True)
+def _too_fast(along, before, after, turn_at, model):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    Whether a turn round ``turn_at`` along the path is too fast for the fixes' times.
+
+    The car drives out from observation ``before`` (``along`` the path) to the turn and back
+    to observation ``after``, slowing to ``uturn_speed_mps`` to turn and neither braking nor
+    accelerating faster than ``travel_accel_mps2``; each side's length less a sigma of the
+    fixes' own error.
+    """
+    start, used, otime, osigma, params = model[0], model[1], model[6], model[7], model[8]
+    if params[P_ACCEL] <= 0:
+        return False
+    a, b = used[start + before], used[start + after]
+    sigma_ends = max(osigma[a], osigma[b])
+    least = _time_to_cover(
+        max(turn_at - along[before] - sigma_ends, 0.0), params[P_UTURN_SPEED], params[P_ACCEL]
+    ) + _time_to_cover(
+        max(along[after] - turn_at - sigma_ends, 0.0), params[P_UTURN_SPEED], params[P_ACCEL]
+    )
+    return otime[b] - otime[a] < least
+
+
+@njit(cache=True, nogil=True)
 def _cut(e, lo, hi, s0, s1):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     """The path without its stretch between ``s0`` and ``s1`` along it (cut mid-stretch too)."""
     n = len(e)
@@ -313,15 +336,8 @@ def _gain(along, e, lo, hi, place_x, place_y, s0, s1, model, travel, net):  # ty
     # than that allows, each side's length less a sigma of the fixes' own error, was never
     # driven (a 14 m spur out and back between two fixes 1 s apart at 8 m/s)
     uturns, turn_at = _turns(e, lo, hi, s0, s1, edge_len, edge_v, edge_twin, out_ptr)
-    if np.isfinite(turn_at) and params[P_ACCEL] > 0:
-        sigma_ends = max(osigma[k[0]], osigma[k[steps]])
-        least = _time_to_cover(
-            max(turn_at - along[before] - sigma_ends, 0.0), params[P_UTURN_SPEED], params[P_ACCEL]
-        ) + _time_to_cover(
-            max(along[after] - turn_at - sigma_ends, 0.0), params[P_UTURN_SPEED], params[P_ACCEL]
-        )
-        if otime[k[steps]] - otime[k[0]] < least:
-            return -np.inf
+    if np.isfinite(turn_at) and _too_fast(along, before, after, turn_at, model):
+        return -np.inf
     odometer, speed_m, slack_m, unknown_lo, unknown_hi = travel
     if len(odometer) or len(speed_m):
         travel_m, slack = between_kernel(k, odometer, speed_m, slack_m, unknown_lo, unknown_hi)
@@ -445,6 +461,53 @@ def collapse_kernel(e, lo, hi, along, model, travel, net):  # type: ignore[no-un
         if not cut:
             break
         removed += 1
+    e, lo, hi, along, ends = _end_turns(e, lo, hi, along, model, net)
+    return e, lo, hi, along, removed + ends
+
+
+@njit(cache=True, nogil=True)
+def _end_turns(e, lo, hi, along, model, net):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    Take out a turn back at the path's end, then one at its start, that is too fast to drive.
+
+    After its last U-turn a path may drive back to its last observation, and no loop closes
+    behind it for :func:`_gain` to price: a last fix thrown 40 m behind the one before, 1 s
+    earlier, is explained that way. A drive back that could not be driven in the time
+    (:func:`_too_fast`, the rule loops obey) ends the path where it turned, its observations
+    held there. Likewise a path that starts by driving to a U-turn starts where it turned.
+    """
+    edge_twin = net[3]
+    removed = 0
+    n = len(e)
+    starts = np.empty(n + 1)
+    starts[0] = 0.0
+    for k in range(n):
+        starts[k + 1] = starts[k] + (hi[k] - lo[k])
+    last = len(along) - 1
+    for k in range(n - 2, -1, -1):  # the last U-turn
+        if edge_twin[e[k]] == e[k + 1]:
+            turn = starts[k + 1]
+            before = -1
+            for i in range(last + 1):
+                if along[i] <= turn + _EPS_M:
+                    before = i
+            if 0 <= before < last and _too_fast(along, before, last, turn, model):
+                e, lo, hi = e[: k + 1].copy(), lo[: k + 1].copy(), hi[: k + 1].copy()
+                along = np.minimum(along, turn)
+                removed += 1
+            break
+    for k in range(len(e) - 1):  # the first U-turn
+        if edge_twin[e[k]] == e[k + 1]:
+            turn = starts[k + 1]
+            after = last + 1
+            for i in range(last, -1, -1):
+                if along[i] >= turn - _EPS_M:
+                    after = i
+            if 0 < after <= last and _too_fast(along, 0, after, turn, model):
+                e, lo, hi = e[k + 1 :].copy(), lo[k + 1 :].copy(), hi[k + 1 :].copy()
+                along = np.maximum(along - turn, 0.0)
+                removed += 1
+            break
     return e, lo, hi, along, removed
 
 

@@ -14,7 +14,7 @@ import pytest
 import mapmatch
 import roadnets
 from mapmatch.evaluation.accuracy.conditions import columns_of, condition_config
-from mapmatch.evaluation.scoring import score_geojson
+from mapmatch.evaluation.scoring import count_turnbacks, score_geojson
 from mapmatch.evaluation.simulate import SimulationConfig, simulate_trips, strip_to_class
 from mapmatch.evaluation.simulate.columns import with_columns
 from mapmatch.hmm.ends import moved_ends, odometer_fit
@@ -22,6 +22,7 @@ from tests.mapmatch.toy import drive, load, lonlat, trace_of, write_osm
 
 if TYPE_CHECKING:
     from pathlib import Path
+    from typing import Any
 
 PRIMARY = {"highway": "primary"}
 RESIDENTIAL = {"highway": "residential"}
@@ -475,6 +476,52 @@ def test_a_last_fix_thrown_onto_a_side_street_is_an_outlier_after_another_spike(
     assert thrown.points.outlier[-1]
     assert thrown.way_ids() == [1]
     assert thrown.matched_length_m < kept.matched_length_m + 2.0
+
+
+def _segment_edges(result: mapmatch.MatchResult) -> list[dict[str, Any]]:
+    features = result.to_geojson()["features"]
+    return [
+        e
+        for f in features
+        if f["properties"].get("kind") == "segment"
+        for e in f["properties"]["edges"]
+    ]
+
+
+@pytest.mark.parametrize("columns", ["positions", "heading_speed"])
+def test_a_last_fix_thrown_back_further_than_a_car_turns_round_ends_the_path_where_it_turned(
+    tmp_path: Path, columns: str
+) -> None:
+    # 1 Hz at 8 m/s along a two-way road, the last fix thrown 45 m back along it: nothing but
+    # a U-turn and a drive back 37 m in 1 s (133 km/h) explained it, after the path's last
+    # observation where no loop closes for the loop test to price (the accuracy matrix's
+    # Liechtenstein realistic-1s trip 13, +1.36 %: a last fix 38 m behind, 1 s later)
+    net = load(write_osm(tmp_path / "road.osm", [(1, [(0, 0), (1000, 0), (2000, 0)], PRIMARY)]))
+    x, _, heading, t = drive([(700.0, 0.0), (900.0, 0.0)], speed_mps=8.0)
+    y = np.random.default_rng(5).normal(0.0, 2.0, len(x))
+    given = {"heading": heading, "speed": 8.0} if columns == "heading_speed" else {}
+    kept = mapmatch.match(trace_of(x, y, time_s=t, **given), net)
+    x[-1] -= 45.0
+    thrown = mapmatch.match(trace_of(x, y, time_s=t, **given), net)
+    assert count_turnbacks(_segment_edges(thrown)).uturns == 0
+    assert kept.matched_length_m - 15.0 < thrown.matched_length_m < kept.matched_length_m + 2.0
+
+
+def test_a_real_turn_round_at_the_end_of_a_trace_stays(tmp_path: Path) -> None:
+    # the same road, 200 m at 8 m/s, then turned round and 60 m back at 4 m/s: a drive back
+    # with time for it stays, with or without headings
+    net = load(write_osm(tmp_path / "road.osm", [(1, [(0, 0), (1000, 0), (2000, 0)], PRIMARY)]))
+    x_out, _, h_out, _ = drive([(700.0, 0.0), (900.0, 0.0)], speed_mps=8.0)
+    x_back, _, h_back, _ = drive([(900.0, 0.0), (840.0, 0.0)], speed_mps=4.0)
+    x = np.concatenate([x_out, x_back[1:]])
+    heading = np.concatenate([h_out, h_back[1:]])
+    speed = np.concatenate([np.full(len(x_out), 8.0), np.full(len(x_back) - 1, 4.0)])
+    y = np.random.default_rng(5).normal(0.0, 2.0, len(x))
+    t = np.arange(len(x), dtype=float)
+    for given in ({}, {"heading": heading, "speed": speed}):
+        result = mapmatch.match(trace_of(x, y, time_s=t, **given), net)
+        assert count_turnbacks(_segment_edges(result)).uturns == 1
+        assert result.matched_length_m == pytest.approx(260.0, abs=5.0)
 
 
 def test_a_turn_round_faster_than_a_car_can_turn_is_taken_out(
