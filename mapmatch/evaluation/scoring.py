@@ -21,7 +21,16 @@ import numpy as np
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
 
-__all__ = ["TripScore", "Turnbacks", "count_turnbacks", "score_geojson", "summarise"]
+    from mapmatch.types import FloatArray
+
+__all__ = [
+    "TripScore",
+    "Turnbacks",
+    "count_turnbacks",
+    "end_shortfalls",
+    "score_geojson",
+    "summarise",
+]
 
 _Key = tuple[int, int, int]
 
@@ -98,6 +107,11 @@ class TripScore:
     source, ``fused_length_m`` its value) and ``true_verdict`` the verdict that same fused
     distance gets against the true length in the same band: a correct verdict is one that
     equals it (empty strings when the result has no distance check).
+
+    ``start_shortfall_m`` / ``end_shortfall_m``: how far the matched path falls short of the
+    true one at its start / its end (negative where it runs on beyond it), from
+    :func:`end_shortfalls`; ``length_error_exact_ends`` the length error left with both ends
+    where the truth has them, i.e. what the route between the ends gets wrong.
     """
 
     trace_id: str
@@ -120,6 +134,16 @@ class TripScore:
     true_verdict: str = ""
     distance_source: str = ""
     fused_length_m: float = math.nan
+    start_shortfall_m: float = math.nan
+    end_shortfall_m: float = math.nan
+
+    @property
+    def length_error_exact_ends(self) -> float:
+        """The length error with the path's ends moved to the true ones."""
+        if self.true_length_m <= 0:
+            return math.nan
+        ends = self.start_shortfall_m + self.end_shortfall_m
+        return (self.matched_length_m + ends - self.true_length_m) / self.true_length_m
 
     @property
     def spurious(self) -> bool:
@@ -134,6 +158,58 @@ class TripScore:
     def to_dict(self) -> dict[str, Any]:
         """Plain dictionary."""
         return asdict(self)
+
+
+def _uncovered_lead(
+    path: Sequence[Mapping[str, Any]], other: Mapping[_Key, list[tuple[float, float]]]
+) -> float:
+    """Metres from the start of ``path`` to its first point that ``other`` covers too."""
+    lead = 0.0
+    for e in path:
+        lo, hi = float(e["start_offset_m"]), float(e["end_offset_m"])
+        spans = other.get((int(e["u"]), int(e["v"]), int(e["key"])), [])
+        starts = [max(a, lo) for a, b in spans if min(b, hi) > max(a, lo)]
+        if starts:
+            return lead + min(starts) - lo
+        lead += max(hi - lo, 0.0)
+    return lead
+
+
+def _reversed_path(path: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """The path backwards, each stretch's offsets measured from its end (for the end's lead)."""
+    return [
+        {"u": e["u"], "v": e["v"], "key": e["key"],
+         "start_offset_m": -float(e["end_offset_m"]), "end_offset_m": -float(e["start_offset_m"])}
+        for e in reversed(path)
+    ]  # fmt: skip
+
+
+def end_shortfalls(
+    truth_edges: Sequence[Mapping[str, Any]], matched_edges: Sequence[Mapping[str, Any]]
+) -> tuple[float, float]:
+    """
+    How far the matched path falls short of the true one at its start and at its end.
+
+    At the start: the true path's metres before the first point the match covers too, less
+    the match's metres before the first point the truth covers (a match that starts early is
+    negative); at the end the same from the last points back. Stretches are compared edge by
+    edge (directed) along their offsets, as the route mismatch is. A match that shares no
+    point with the truth has the whole true length short at each end.
+
+    Examples
+    --------
+    >>> def e(u, lo, hi): return {"u": u, "v": u + 1, "key": 0, "start_offset_m": lo,
+    ...                           "end_offset_m": hi}
+    >>> end_shortfalls([e(1, 0, 100), e(2, 0, 50)], [e(1, 20, 100), e(2, 0, 60), e(3, 0, 5)])
+    (20.0, -15.0)
+    """
+    truth, matched = _intervals(truth_edges), _intervals(matched_edges)
+    start = _uncovered_lead(truth_edges, matched) - _uncovered_lead(matched_edges, truth)
+    back_truth, back_matched = _reversed_path(truth_edges), _reversed_path(matched_edges)
+    end = _uncovered_lead(back_truth, _intervals(back_matched)) - _uncovered_lead(
+        back_matched, _intervals(back_truth)
+    )
+    return start, end
 
 
 def _band_verdict(relative: float, band: Sequence[float]) -> str:
@@ -211,6 +287,7 @@ def score_geojson(result: Mapping[str, Any], truth: Mapping[str, Any]) -> TripSc
     )
     n_points = len(point_edges) or len(points)
     reference = float(truth.get("length_m", true_len)) or true_len
+    start_short, end_short = end_shortfalls(truth["edges"], matched_edges)
     turns = [count_turnbacks(edges) for edges in segments]
     uturns, loops = sum(t.uturns for t in turns), sum(t.loops for t in turns)
     true_turns = count_turnbacks(truth["edges"])
@@ -242,7 +319,15 @@ def score_geojson(result: Mapping[str, Any], truth: Mapping[str, Any]) -> TripSc
         true_verdict=true_verdict,
         distance_source=source,
         fused_length_m=fused,
+        start_shortfall_m=round(start_short, 6),
+        end_shortfall_m=round(end_short, 6),
     )
+
+
+def _share_within(errors: FloatArray, band: float) -> float:
+    """The share of the known (not NaN) errors within ``band``; NaN when none is known."""
+    known = errors[~np.isnan(errors)]
+    return float(np.mean(known <= band)) if len(known) else float("nan")
 
 
 def summarise(scores: Sequence[TripScore]) -> dict[str, float]:
@@ -252,7 +337,8 @@ def summarise(scores: Sequence[TripScore]) -> dict[str, float]:
     ``mismatch_mean`` / ``_median`` / ``_p95`` route mismatch; ``point_accuracy`` mean share
     of fixes on their true edge; ``length_error_mean`` signed mean, ``length_error_abs_max``
     / ``_abs_p95`` of ``|length error|``; ``within_1pct`` / ``within_2pct`` share of trips
-    whose matched length is within 1 % / 2 % of the true one; ``spurious_share`` share of
+    whose matched length is within 1 % / 2 % of the true one, ``exact_ends_within_1pct`` /
+    ``_2pct`` the same with each path's ends at the true ones; ``spurious_share`` share of
     trips with a U-turn or loop the truth does not have, ``spurious_uturns`` /
     ``spurious_loops`` their totals; ``verdict_trips`` trips whose fused distance is an
     odometer reading and that have no break, ``verdict_accuracy`` the share of those whose
@@ -260,6 +346,7 @@ def summarise(scores: Sequence[TripScore]) -> dict[str, float]:
     """
     mismatch = np.array([s.mismatch for s in scores])
     error = np.abs([s.length_error for s in scores])
+    exact_ends = np.abs(np.array([s.length_error_exact_ends for s in scores], dtype=np.float64))
     judged = [s for s in scores if s.distance_source == "odometer" and s.breaks == 0]
     return {
         "traces": float(len(scores)),
@@ -273,6 +360,8 @@ def summarise(scores: Sequence[TripScore]) -> dict[str, float]:
         "length_error_abs_p95": float(np.nanpercentile(error, 95)),
         "within_1pct": float(np.mean(error <= 0.01)),
         "within_2pct": float(np.mean(error <= 0.02)),
+        "exact_ends_within_1pct": _share_within(exact_ends, 0.01),
+        "exact_ends_within_2pct": _share_within(exact_ends, 0.02),
         "spurious_share": float(np.mean([s.spurious for s in scores])),
         "spurious_uturns": float(sum(s.spurious_uturns for s in scores)),
         "spurious_loops": float(sum(s.spurious_loops for s in scores)),

@@ -67,6 +67,23 @@ def test_a_mid_road_uturn_is_counted_and_spurious() -> None:
     assert score.mismatch == pytest.approx(50.0 / 240.0)  # the route barely sees it
 
 
+def test_ends_short_or_beyond_the_truth_are_told_apart_from_the_route() -> None:
+    # starts 20 m late, runs 15 m past the true end onto the next block
+    early_stop = [_edge(1, 2, 20, 80), _edge(2, 3), _edge(3, 4), _edge(4, 5, 0, 15)]
+    score = score_geojson(_result(early_stop), _truth(STREET))
+    assert (score.start_shortfall_m, score.end_shortfall_m) == (20.0, -15.0)
+    assert score.length_error == pytest.approx(-5.0 / 240.0)
+    assert score.length_error_exact_ends == pytest.approx(0.0)
+    # a spur in the middle is the route's, not the ends'
+    spur = [_edge(1, 2, 10, 80), _edge(2, 3, 0, 50), _edge(3, 2, 30, 80), _edge(2, 3), _edge(3, 4)]
+    score = score_geojson(_result(spur), _truth(STREET))
+    assert (score.start_shortfall_m, score.end_shortfall_m) == (10.0, 0.0)
+    assert score.length_error_exact_ends == pytest.approx(100.0 / 240.0)
+    # ends on the wrong road: short by everything up to where the roads meet
+    score = score_geojson(_result([_edge(1, 2), _edge(2, 9)]), _truth(STREET))
+    assert (score.start_shortfall_m, score.end_shortfall_m) == (0.0, 160.0 - 80.0)
+
+
 def test_a_uturn_at_a_node_and_a_backwards_stretch() -> None:
     at_node = [_edge(1, 2), _edge(2, 3), _edge(3, 2), _edge(2, 3), _edge(3, 4)]
     assert count_turnbacks(at_node).uturns == 2
@@ -156,6 +173,7 @@ def test_summary_of_length_spurious_and_verdicts() -> None:
     summary = summarise(scores)
     assert summary["within_1pct"] == 0.5
     assert summary["within_2pct"] == 0.75
+    assert np.isnan(summary["exact_ends_within_1pct"])  # no shortfalls given: unknown
     assert summary["spurious_share"] == 0.25
     assert summary["spurious_uturns"] == 2
     assert summary["verdict_trips"] == 2  # the trip with a break is not judged

@@ -34,6 +34,11 @@ class Cell:
     ``ends_within_1pct`` / ``_2pct``: the share of trips whose exact route, cut at the noisy
     first and last fix, is within 1 % / 2 % (:attr:`TripRow.ends_error`): the most a matcher
     can reach where the neighbouring fixes say nothing of the ends (sparse sampling).
+    ``exact_ends_within_1pct`` / ``_2pct``: the share of trips whose match would be within
+    1 % / 2 % with its path's ends at the true ones
+    (:attr:`~mapmatch.evaluation.scoring.TripScore.length_error_exact_ends`): what the route
+    between the ends gets right. The two columns bracket a cell: the first is the noise at the
+    ends, the second everything else.
     """
 
     extract: str
@@ -57,6 +62,8 @@ class Cell:
     verdict_accuracy: float
     ends_within_1pct: float
     ends_within_2pct: float
+    exact_ends_within_1pct: float
+    exact_ends_within_2pct: float
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready (NaN becomes ``None``)."""
@@ -102,6 +109,8 @@ def _cell(extract: str, condition: str, spec: str, rows: list[TripRow]) -> Cell:
             spurious_loops=0,
             verdict_trips=0,
             verdict_accuracy=nan,
+            exact_ends_within_1pct=0.0,
+            exact_ends_within_2pct=0.0,
             **ends,
         )
     s = summarise(scores)
@@ -125,6 +134,8 @@ def _cell(extract: str, condition: str, spec: str, rows: list[TripRow]) -> Cell:
         spurious_loops=int(s["spurious_loops"]),
         verdict_trips=int(s["verdict_trips"]),
         verdict_accuracy=s["verdict_accuracy"],
+        exact_ends_within_1pct=s["exact_ends_within_1pct"] * ok,
+        exact_ends_within_2pct=s["exact_ends_within_2pct"] * ok,
         **ends,
     )
 

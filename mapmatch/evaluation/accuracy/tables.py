@@ -41,8 +41,9 @@ def matrix_markdown(pooled: Sequence[Cell]) -> str:
     lines = [
         "| condition | input | trips | failed | mismatch mean | mismatch p95 | length error "
         "mean | \\|length error\\| p95 | within 1 % | within 2 % | spurious U-turn/loop "
-        "| verdict right | points/s | exact route, noisy ends: within 1 % / 2 % |",
-        "|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|",
+        "| verdict right | points/s | exact route, noisy ends: within 1 % / 2 % "
+        "| matched route, exact ends: within 1 % / 2 % |",
+        "|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|",
     ]
     for c in pooled:
         verdict = f"{pct(c.verdict_accuracy, 0)} of {c.verdict_trips}" if c.verdict_trips else "-"
@@ -53,7 +54,8 @@ def matrix_markdown(pooled: Sequence[Cell]) -> str:
             f"| {pct(c.within_1pct, 0)} | {pct(c.within_2pct, 0)} "
             f"| {pct(c.spurious_share, 0)} ({c.spurious_uturns} U, {c.spurious_loops} L) "
             f"| {verdict} | {c.points_per_s:,.0f} "
-            f"| {pct(c.ends_within_1pct, 0)} / {pct(c.ends_within_2pct, 0)} |"
+            f"| {pct(c.ends_within_1pct, 0)} / {pct(c.ends_within_2pct, 0)} "
+            f"| {pct(c.exact_ends_within_1pct, 0)} / {pct(c.exact_ends_within_2pct, 0)} |"
         )
     return "\n".join(lines)
 
