@@ -26,7 +26,10 @@ ordinary clients' p99 against the quiet run (must stay within 2x), every 5xx on 
 ``--in-process`` also runs, for each worker count N, N processes that each call the service's
 own request handler (``MatchService.run``: the JSON body parsed, matched, the GeoJSON written)
 on the same bodies in a loop for ``--duration-s``, with no HTTP and no client, and prints the
-HTTP rows' requests/s as a share of that (issue 15: the HTTP path at >= 70 % of in-process).
+HTTP rows' requests/s as a share of that (issue 15: the HTTP path at >= 70 % of in-process),
+and the same per CPU second of the server's processes (all their threads, read from /proc
+before and after the load) against per CPU second of the in-process ones: the clients share
+the cores, so the first ratio also holds what they take, the second only what HTTP costs.
 
 Bounded: loopback only, a fixed duration, a fixed number of clients.
 """
@@ -76,6 +79,7 @@ class RunResult:
     rss_after_mb: float
     pss_before_mb: float
     pss_after_mb: float
+    server_cpu_s: float = float("nan")
 
     def row(self) -> str:
         lat = np.array(self.latencies_s) * 1000.0
@@ -179,6 +183,17 @@ def memory_mb(pid: int) -> tuple[float, float]:
                 elif line.startswith("Pss:"):
                     pss += int(line.split()[1])
     return rss / 1024.0, pss / 1024.0
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU seconds of a process tree so far, every thread (Linux /proc)."""
+    ticks = 0
+    for p in _tree(pid):
+        with contextlib.suppress(OSError):
+            # the fields after the command's closing parenthesis: utime and stime are 12 and 13
+            fields = Path(f"/proc/{p}/stat").read_text().rsplit(")", 1)[1].split()
+            ticks += int(fields[11]) + int(fields[12])
+    return ticks / os.sysconf("SC_CLK_TCK")
 
 
 @contextlib.contextmanager
@@ -416,11 +431,13 @@ def run(
     with server(workers, cache_dir, log) as (url, process):
         asyncio.run(loader(url, bodies, clients=args.clients, duration_s=args.warmup_s))
         rss0, pss0 = memory_mb(process.pid)
+        cpu0 = cpu_seconds(process.pid)
         started = time.perf_counter()
         count, latencies, errors = asyncio.run(
             loader(url, bodies, clients=args.clients, duration_s=args.duration_s)
         )
         elapsed = time.perf_counter() - started
+        server_cpu = cpu_seconds(process.pid) - cpu0
         rss1, pss1 = memory_mb(process.pid)
         if process.poll() is not None:
             msg = f"the server died under load:\n{log.read_text()[-3000:]}"
@@ -457,6 +474,7 @@ def run(
         rss1,
         pss0,
         pss1,
+        server_cpu,
     )
 
 
@@ -492,18 +510,22 @@ def _in_process_worker(
         for body in bodies:
             service.run(body, "json", query)
     barrier.wait()
-    count, started = 0, time.perf_counter()
+    count, started, cpu = 0, time.perf_counter(), time.process_time()
     stop = started + duration_s
     while time.perf_counter() < stop:
         service.run(bodies[count % len(bodies)], "json", query)
         count += 1
-    out.put((count, time.perf_counter() - started))
+    out.put((count, time.perf_counter() - started, time.process_time() - cpu))
 
 
 def in_process(
     workers: int, args: argparse.Namespace, bodies: list[bytes], cache_dir: str
-) -> float:
-    """Requests/s of ``workers`` processes each running the service's handler, no HTTP."""
+) -> tuple[float, float]:
+    """
+    Requests/s of ``workers`` processes each running the service's handler, no HTTP.
+
+    And requests per CPU second of those processes (every thread's).
+    """
     import multiprocessing
 
     spawn = multiprocessing.get_context("spawn")
@@ -520,7 +542,9 @@ def in_process(
     done = [out.get(timeout=args.duration_s + 300) for _ in procs]
     for proc in procs:
         proc.join()
-    return float(sum(count / elapsed for count, elapsed in done))
+    rate = float(sum(count / elapsed for count, elapsed, _ in done))
+    per_cpu = sum(count for count, _, _ in done) / sum(cpu for _, _, cpu in done)
+    return rate, float(per_cpu)
 
 
 def _one_cost(n: int, k: int, r: float, s: float, cache_dir: str) -> None:
@@ -649,14 +673,24 @@ def main(argv: list[str] | None = None) -> int:
             f"\nIn-process: N processes each running the service's handler (JSON body -> "
             f"GeoJSON) on the same bodies, no HTTP, no client ({args.duration_s:.0f} s):\n"
         )
-        print("| workers | client | HTTP req/s | in-process req/s | HTTP / in-process |")
-        print("|---|---|---|---|---|")
+        print(
+            "The last three columns count requests per CPU second of the server's processes "
+            "(HTTP) and of the in-process ones: the cost of the HTTP path itself, whatever "
+            "share of the cores the clients take.\n"
+        )
+        print(
+            "| workers | client | HTTP req/s | in-process req/s | HTTP / in-process | "
+            "HTTP req per server CPU-s | in-process req per CPU-s | HTTP / in-process per CPU |"
+        )
+        print("|---|---|---|---|---|---|---|---|")
         for result in results:
             rate = result.requests / result.duration_s
-            base = local[result.workers]
+            base, base_cpu = local[result.workers]
+            per_cpu = result.requests / result.server_cpu_s
             print(
                 f"| {result.workers} | {result.client} | {rate:.1f} | {base:.1f} | "
-                f"{100 * rate / base:.0f} % |"
+                f"{100 * rate / base:.0f} % | {per_cpu:.1f} | {base_cpu:.1f} | "
+                f"{100 * per_cpu / base_cpu:.0f} % |"
             )
     if ABUSE:
         print(f"\nThe same load with 4 hostile clients beside it ({args.duration_s:.0f} s):\n")
