@@ -2,11 +2,12 @@
 
 Gaussian in the distance (Newson & Krumm), floored so that an outlier cannot veto the true
 road; plus a Gaussian on the angle between the reported heading and the road direction whose
-weight rises with speed (reference paper, section 6, eq. 23).
+weight rises with speed (reference paper, section 6, eq. 23); and a cost for a service road
+under a car faster than such roads are driven (:func:`road_class_score`).
 
 The scores are compiled functions of one candidate (:func:`distance_score`,
-:func:`heading_score`, :func:`speed_weight`) that the trellis kernel calls; the functions
-below apply them to arrays.
+:func:`heading_score`, :func:`speed_weight`, :func:`road_class_score`) that the trellis kernel
+calls; the functions below apply them to arrays.
 """
 
 from __future__ import annotations
@@ -22,8 +23,11 @@ from mapmatch.hmm.params import (
     P_HEADING_MIN_SPEED,
     P_HEADING_SIGMA,
     P_MAX_EMISSION_PENALTY,
+    P_SERVICE_PENALTY,
+    P_SERVICE_SPEED,
     model_params,
 )
+from roadnets.drivable import ROAD_CLASSES
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -41,10 +45,13 @@ __all__ = [
     "heading_weight",
     "log_emission",
     "log_heading",
+    "road_class_score",
     "speed_weight",
 ]
 
 _LOGE2 = float(np.log(2.0))
+#: The edge class of OSM ``highway=service`` (parking aisles, driveways, access roads).
+SERVICE_CLASS = ROAD_CLASSES.index("service")
 
 
 def log_emission(distance_m: FloatArray, *, sigma_m: FloatArray | float) -> FloatArray:
@@ -100,6 +107,20 @@ def speed_weight(speed, params):  # type: ignore[no-untyped-def]  # pragma: no c
     if np.isnan(weight):
         return 0.0
     return min(max(weight, 0.0), 1.0)
+
+
+@njit(cache=True, nogil=True)
+def road_class_score(edge_class, speed, params):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """
+    Log prior of the road's class at the car's speed.
+
+    ``-service_penalty`` on a service road when ``speed`` (reported, else the fixes' own pace)
+    is over ``service_speed_mps``; else 0. Parking aisles and driveways beside a main road lie
+    within the position noise of it; a car that moves that fast is on the main road.
+    """
+    if edge_class == SERVICE_CLASS and speed > params[P_SERVICE_SPEED]:
+        return -params[P_SERVICE_PENALTY]
+    return 0.0
 
 
 @njit(cache=True, nogil=True)

@@ -47,6 +47,8 @@ PARAMS = (
     "travel_accel_mps2",
     "uturn_speed_mps",
     "course_prune_deg",
+    "service_penalty",
+    "service_speed_mps",
 )
 (
     P_MAX_EMISSION_PENALTY,
@@ -77,6 +79,8 @@ PARAMS = (
     P_ACCEL,
     P_UTURN_SPEED,
     P_COURSE_PRUNE,
+    P_SERVICE_PENALTY,
+    P_SERVICE_SPEED,
 ) = range(len(PARAMS))
 
 _CACHE: dict[int, tuple[MatchConfig, FloatArray]] = {}

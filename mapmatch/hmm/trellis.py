@@ -14,7 +14,13 @@ import numpy as np
 from numba import njit
 
 from mapmatch.hmm.candidates import Candidates
-from mapmatch.hmm.emission import angle_between, distance_score, heading_score, speed_weight
+from mapmatch.hmm.emission import (
+    angle_between,
+    distance_score,
+    heading_score,
+    road_class_score,
+    speed_weight,
+)
 from mapmatch.hmm.observations import between_kernel, travel_arrays
 from mapmatch.hmm.params import (
     P_CANDIDATE_MARGIN,
@@ -154,7 +160,7 @@ def observation_courses(obs: Observations, used: IntArray, config: MatchConfig) 
 
 @njit(cache=True, nogil=True)
 def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    routing, edge_speed, cands, used, cut_after, obs, course, travel, params
+    routing, edge_speed, edge_class, cands, used, cut_after, obs, course, travel, params
 ):
     """
     :func:`solve` in one call, routes searched inside.
@@ -193,6 +199,7 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
             e = distance_score(c_dist[r], osigma[u], params)
             if has_heading:
                 e += heading_score(oheading[u], c_bear[r], weight, params)
+            e += road_class_score(edge_class[c_edge[r]], ospeed[u], params)
             em_all[r - lo + m] = e
             best = max(best, e)
         # an observation without a reported heading (none in the trace, or NaN) has its course;
@@ -362,6 +369,7 @@ def _solve_arrays(
     out: tuple[Any, ...] = solve_kernel(
         route_inputs(net),  # read each time: the table may have come meanwhile
         net.arrays.edge_speed_mps,
+        net.arrays.edge_class,
         cand_arrays,
         np.ascontiguousarray(used, dtype=np.int64),
         np.ascontiguousarray(cut_after, dtype=np.bool_),
