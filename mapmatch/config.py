@@ -215,21 +215,21 @@ class MatchConfig:
         le=1000,
     )
     service_penalty: float = _param(
-        1.0,
+        2.0,
         doc="what a candidate on a service road (parking aisle, driveway, access road) costs "
         "when the car is faster than service_speed_mps: such roads often run within the "
-        "position noise of the road beside them (measured on the matrix: 40 trips changed, "
-        "6 into 1 %, none out, 28 with a lower route mismatch, none higher; at 2 nats 3 "
-        "trips worse)",
+        "position noise of the road beside them (measured on the matrix: 30 trips changed, "
+        "6 into 1 %, 1 out with a lower route mismatch, 30 with a lower mismatch, none "
+        "higher; 3 nats put 4 out)",
         unit="nats",
         ge=0,
         le=100,
     )
     service_speed_mps: float = _param(
         8.0,
-        doc="a car faster than this (its reported speed, else its fixes' own pace) is not "
-        "on a service road: 29 km/h (at 6 m/s and 2 nats, 1 s trips on two extracts gained "
-        "spurious turns and route mismatch)",
+        doc="a car faster than this (29 km/h) by its speed and by its pace over 4 s is not on "
+        "a service road (the speed from 1 s steps alone reads a car park's standing car as "
+        "fast: 2 traces of the peers' clean sets got worse with it)",
         unit="m/s",
         ge=0,
         le=100,

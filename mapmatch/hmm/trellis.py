@@ -16,6 +16,7 @@ from numba import njit
 from mapmatch.hmm.candidates import Candidates
 from mapmatch.hmm.emission import (
     angle_between,
+    chord_pace,
     distance_score,
     heading_score,
     road_class_score,
@@ -189,6 +190,7 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     ptr = np.zeros(n + 1, dtype=np.int64)
     margin = params[P_CANDIDATE_MARGIN]
     most = int(params[P_MAX_CANDIDATES])
+    pace = chord_pace(used, ox, oy, otime)
     m = 0
     for i in range(n):
         u = used[i]
@@ -199,7 +201,7 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
             e = distance_score(c_dist[r], osigma[u], params)
             if has_heading:
                 e += heading_score(oheading[u], c_bear[r], weight, params)
-            e += road_class_score(edge_class[c_edge[r]], ospeed[u], params)
+            e += road_class_score(edge_class[c_edge[r]], ospeed[u], pace[i], params)
             em_all[r - lo + m] = e
             best = max(best, e)
         # an observation without a reported heading (none in the trace, or NaN) has its course;
