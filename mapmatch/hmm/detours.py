@@ -307,9 +307,7 @@ def drop_detour_fixes(
                 break  # bounds come largest first: none of the rest can be chosen
             inputs = inputs or trace_inputs(obs, cands, config)
             pair = used[[drop - 1, drop + 1]]
-            bridge = bridge_transitions(
-                net, inputs, pair, cuts(pair, missing_before), solution.course_deg
-            )
+            bridge = bridge_transitions(net, inputs, pair, cuts(pair, missing_before), solution)
             width = bridge.shape[-1]  # the pair's padding, within the trace's
             if not len(bridge) or not width:
                 continue

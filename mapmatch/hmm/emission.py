@@ -117,13 +117,14 @@ def chord_pace(used, x, y, time_s):  # type: ignore[no-untyped-def]  # pragma: n
     """
     Each used observation's pace: the straight line over the used ones around it, over time.
 
-    The window grows on both sides until it spans :data:`PACE_WINDOW_S` (or the trace ends).
-    A chord cuts curves, so the pace is never above the speed driven, and over 4 s the fixes'
-    noise moves it little: a car standing in a car park reads about 2 m/s at 5 m of noise,
-    where the speed from neighbouring 1 s steps reads 7. NaN without times.
+    One entry per observation (NaN for those not in ``used``, and without times). The window
+    grows on both sides until it spans :data:`PACE_WINDOW_S` (or the trace ends). A chord cuts
+    curves, so the pace is never above the speed driven, and over 4 s the fixes' noise moves it
+    little: a car standing in a car park reads about 2 m/s at 5 m of noise, where the speed
+    from neighbouring 1 s steps reads 7.
     """
     n = len(used)
-    out = np.full(n, np.nan)
+    out = np.full(len(x), np.nan)
     for i in range(n):
         j, k = i, i
         while time_s[used[k]] - time_s[used[j]] < PACE_WINDOW_S and (j > 0 or k < n - 1):
@@ -132,7 +133,7 @@ def chord_pace(used, x, y, time_s):  # type: ignore[no-untyped-def]  # pragma: n
         a, b = used[j], used[k]
         span = time_s[b] - time_s[a]
         if span > 0:
-            out[i] = np.hypot(x[b] - x[a], y[b] - y[a]) / span
+            out[used[i]] = np.hypot(x[b] - x[a], y[b] - y[a]) / span
     return out
 
 

@@ -21,7 +21,8 @@ class Solution:
     ``states`` is the chosen candidate rank of each used fix (-1: none); ``pieces`` are
     ``(start, stop)`` ranges of *used* positions; ``kinds`` the route kind of every padded
     transition; ``routes`` the routes the transitions were scored on (their edges);
-    ``course_deg`` each observation's course the candidates were chosen by (NaN: none).
+    ``course_deg`` and ``pace_mps`` each observation's course and pace the candidates were
+    chosen by (NaN: none).
     """
 
     used: IntArray
@@ -34,6 +35,7 @@ class Solution:
     log_emission: FloatArray
     log_transition: FloatArray
     course_deg: FloatArray
+    pace_mps: FloatArray
 
     @property
     def breaks(self) -> list[int]:

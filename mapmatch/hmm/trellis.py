@@ -49,6 +49,7 @@ __all__ = [
     "model_fixes",
     "observation_arrays",
     "observation_courses",
+    "observation_paces",
     "repair_breaks",
     "solve",
     "solve_kernel",
@@ -145,23 +146,25 @@ def observation_courses(obs: Observations, used: IntArray, config: MatchConfig) 
     ``course_prune_deg`` 0. The trellis drops the candidates that run more than
     ``course_prune_deg`` from it where the observation has no reported heading.
     """
+    sigma = np.ascontiguousarray(obs.sigma_m, np.float64)
+    courses = _courses(*_track(obs, used), sigma, model_params(config))  # type: ignore[call-arg]
+    return np.asarray(courses, np.float64)
+
+
+def _track(obs: Observations, used: IntArray) -> tuple[Any, ...]:
+    """``(used, x, y, time)`` as the per-observation kernels read them."""
     f8 = np.float64
-    return np.asarray(
-        _courses(
-            np.ascontiguousarray(used, np.int64),
-            np.ascontiguousarray(obs.x, f8),
-            np.ascontiguousarray(obs.y, f8),
-            np.ascontiguousarray(obs.time_s, f8),
-            np.ascontiguousarray(obs.sigma_m, f8),
-            model_params(config),
-        ),
-        dtype=f8,
+    return (
+        np.ascontiguousarray(used, np.int64),
+        np.ascontiguousarray(obs.x, f8),
+        np.ascontiguousarray(obs.y, f8),
+        np.ascontiguousarray(obs.time_s, f8),
     )
 
 
 @njit(cache=True, nogil=True)
 def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    routing, edge_speed, edge_class, cands, used, cut_after, obs, course, travel, params
+    routing, edge_speed, edge_class, cands, used, cut_after, obs, course, pace, travel, params
 ):
     """
     :func:`solve` in one call, routes searched inside.
@@ -190,7 +193,6 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     ptr = np.zeros(n + 1, dtype=np.int64)
     margin = params[P_CANDIDATE_MARGIN]
     most = int(params[P_MAX_CANDIDATES])
-    pace = chord_pace(used, ox, oy, otime)
     m = 0
     for i in range(n):
         u = used[i]
@@ -201,7 +203,7 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
             e = distance_score(c_dist[r], osigma[u], params)
             if has_heading:
                 e += heading_score(oheading[u], c_bear[r], weight, params)
-            e += road_class_score(edge_class[c_edge[r]], ospeed[u], pace[i], params)
+            e += road_class_score(edge_class[c_edge[r]], ospeed[u], pace[u], params)
             em_all[r - lo + m] = e
             best = max(best, e)
         # an observation without a reported heading (none in the trace, or NaN) has its course;
@@ -312,23 +314,28 @@ def solve(
     cut_after: BoolArray,
     config: MatchConfig,
     course: FloatArray | None = None,
+    pace: FloatArray | None = None,
 ) -> Solution:
     """
     Score the trellis over the ``used`` fixes and find the best sequence.
 
-    ``course`` is each observation's course (:func:`observation_courses`), worked out from
-    ``used`` when not given: a trellis over some of a solution's observations (the detour
-    search's bridges, :func:`bridge_transitions`) is given the solution's, so that its
-    observations keep the same candidates.
+    ``course`` and ``pace`` are each observation's course (:func:`observation_courses`) and
+    pace (:func:`observation_paces`), which choose its candidates; worked out from ``used``
+    when not given, and kept in the solution: a trellis over some of a solution's
+    observations (the detour search's bridges, :func:`bridge_transitions`) is given the
+    solution's, so that its observations keep the same candidates.
     """
     if course is None:
         course = observation_courses(fixes, used, config)
-    out = _solve_arrays(net, trace_inputs(fixes, all_cands, config), used, cut_after, course)
+    if pace is None:
+        pace = observation_paces(fixes, used)
+    inputs = trace_inputs(fixes, all_cands, config)
+    out = _solve_arrays(net, inputs, used, cut_after, course, pace)
     cand_arrays, states, piece_lo, piece_hi, post, kinds, em_pad, tr_pad, found, ea, eb = out[:11]
     cands = Candidates(*cand_arrays)
     pieces = list(zip(piece_lo.tolist(), piece_hi.tolist(), strict=True))
     routes = routes_found(net, ea, eb, found)
-    return Solution(used, cands, states, pieces, post, kinds, routes, em_pad, tr_pad, course)
+    return Solution(used, cands, states, pieces, post, kinds, routes, em_pad, tr_pad, course, pace)
 
 
 def trace_inputs(
@@ -357,12 +364,13 @@ def _solve_arrays(
     used: IntArray,
     cut_after: BoolArray,
     course: FloatArray,
+    pace: FloatArray,
 ) -> tuple[Any, ...]:
     """
     :func:`solve_kernel` over the ``used`` fixes of a trace (:func:`trace_inputs`).
 
-    ``course``: each observation's course the candidates are chosen by
-    (:func:`observation_courses`).
+    ``course`` and ``pace``: each observation's course and pace the candidates are chosen by
+    (:func:`observation_courses`, :func:`observation_paces`).
 
     A sparse trace (its steps' route search bounds) asks the network for its route table,
     which the next traces may use.
@@ -377,6 +385,7 @@ def _solve_arrays(
         np.ascontiguousarray(cut_after, dtype=np.bool_),
         obs,
         course,
+        pace,
         travel,
         params,
     )
@@ -391,19 +400,32 @@ def bridge_transitions(
     inputs: tuple[Any, ...],
     pair: IntArray,
     cut_after: BoolArray,
-    course: FloatArray,
+    solution: Solution,
 ) -> FloatArray:
     """
     The log transitions of the two-fix trellis over ``pair``: what :func:`solve` scores.
 
-    ``inputs`` are the trace's :func:`trace_inputs`, ``course`` the courses of the solution
-    the pair belongs to (:attr:`Solution.course_deg`: the pair's observations keep that
-    solution's candidates and ranks); the result has shape ``(1, width, width)`` (the
+    ``inputs`` are the trace's :func:`trace_inputs`, ``solution`` the one the pair belongs to
+    (its :attr:`Solution.course_deg` and :attr:`Solution.pace_mps`: the pair's observations
+    keep that solution's candidates and ranks); the result has shape ``(1, width, width)`` (the
     pair's candidates by rank, padded with ``-inf``). Spares the rest of a
     :class:`Solution`: its candidates, its routes' edges.
     """
-    tr_pad: FloatArray = _solve_arrays(net, inputs, pair, cut_after, course)[7]
+    tr_pad: FloatArray = _solve_arrays(
+        net, inputs, pair, cut_after, solution.course_deg, solution.pace_mps
+    )[7]
     return tr_pad
+
+
+def observation_paces(obs: Observations, used: IntArray) -> FloatArray:
+    """
+    The pace of each observation: :func:`~mapmatch.hmm.emission.chord_pace` over ``used``.
+
+    NaN for observations not in ``used``. A candidate on a service road costs
+    ``service_penalty`` where both the pace and the observation's speed are fast
+    (:func:`~mapmatch.hmm.emission.road_class_score`).
+    """
+    return np.asarray(chord_pace(*_track(obs, used)), np.float64)
 
 
 def observation_arrays(obs: Observations) -> tuple[FloatArray, ...]:

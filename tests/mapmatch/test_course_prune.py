@@ -85,9 +85,9 @@ def test_a_trellis_over_some_observations_keeps_their_candidates(
     default_net: roadnets.RoadNetwork,
 ) -> None:
     # the detour search bridges two observations of a solution with a trellis of their own
-    # and reads its scores by the solution's candidate ranks: given the solution's courses,
-    # the bridge's observations keep the candidates they had (in a trellis of their own
-    # both are ends, with no course)
+    # and reads its scores by the solution's candidate ranks: given the solution's courses
+    # and paces, the bridge's observations keep the candidates they had (in a trellis of
+    # their own both are ends, with no course)
     config = mapmatch.MatchConfig()
     obs, all_cands, solution = _solved(default_net, _trips(default_net, count=1)[0], config)
     c, used = solution.cands, solution.used
@@ -95,7 +95,9 @@ def test_a_trellis_over_some_observations_keeps_their_candidates(
     differs = 0
     for t in range(1, len(used) - 1, 5):
         pair = used[[t - 1, t + 1]]
-        bridge = solve(default_net, obs, all_cands, pair, never, config, solution.course_deg)
+        bridge = solve(
+            default_net, obs, all_cands, pair, never, config, solution.course_deg, solution.pace_mps
+        )
         for k, at in enumerate((t - 1, t + 1)):
             kept = c.edge[c.ptr[at] : c.ptr[at + 1]].tolist()
             assert bridge.cands.edge[bridge.cands.ptr[k] : bridge.cands.ptr[k + 1]].tolist() == kept
