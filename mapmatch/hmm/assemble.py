@@ -10,7 +10,9 @@ held car's scatter of it or the time between them left the car time to get there
 
 Fixes left out of the model (a stopped car's repeats, outliers, fixes dropped to join a break)
 are placed at the nearest point of the path between their neighbours' positions; one whose
-nearest point is farther than its search radius stays unmatched.
+nearest point is farther than its search radius stays unmatched. So does a fix of the model
+that the path holds farther than its search radius (a turn it cut short, a stop it merged):
+the path does not explain it, and the fix is reported as displaced, not placed.
 """
 
 from __future__ import annotations
@@ -114,7 +116,8 @@ def _place(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     the chosen candidate's posterior per used observation, ``ids`` ``(node_osm_id, edge_u,
     edge_v, edge_key)``. Returns the trimmed rows ``(row_ptr, edge, lo, hi)``, each piece's
     first and last fix, and per fix ``(matched, in_model, edge, offset, confidence,
-    segment, x, y, distance, u, v, key)`` (the position at edge 0 for unmatched fixes).
+    segment, x, y, distance, u, v, key)`` (the position at edge 0 for unmatched fixes), and
+    which fixes of the model the path holds farther than their search radius (unmatched).
     """
     row_ptr, w_edge, w_lo, w_hi, along_all = walked
     p_lo, p_hi, used = pieces
@@ -216,9 +219,17 @@ def _place(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     u = np.full(n, -1, dtype=np.int64)
     v = np.full(n, -1, dtype=np.int64)
     key = np.full(n, -1, dtype=np.int64)
+    displaced = np.zeros(n, dtype=np.bool_)
     for f in range(n):
         e = f_edge[f] if matched[f] else 0
         px[f], py[f] = point_on_edge(e, f_off[f] if matched[f] else 0.0, *geom)
+        if matched[f] and np.hypot(px[f] - fx[f], py[f] - fy[f]) > fradius[f]:
+            # a fix of the model that the path holds (a turn it cut, a stop it merged) farther
+            # than its search radius: the path does not explain it, and it says so
+            matched[f] = False
+            displaced[f] = True
+            in_model[f] = False
+            segment_of[f] = -1
         if matched[f]:
             distance[f] = np.hypot(px[f] - fx[f], py[f] - fy[f])
             u[f], v[f], key[f] = node_osm[edge_u[e]], node_osm[edge_v[e]], edge_key[e]
@@ -227,10 +238,18 @@ def _place(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
             f_edge[f] = -1
             f_off[f] = np.nan
             confidence[f] = 0.0
+    for p in range(n_pieces):  # each piece runs from its first to its last fix still on it
+        lo, hi = first_fix[p], last_fix[p]
+        while lo < hi and segment_of[lo] != p:
+            lo += 1
+        while hi > lo and segment_of[hi] != p:
+            hi -= 1
+        first_fix[p], last_fix[p] = lo, hi
     return (
         (t_ptr, t_edge[:m], t_lo[:m], t_hi[:m]),
         first_fix, last_fix,
         (matched, in_model, f_edge, f_off, confidence, segment_of, px, py, distance, u, v, key),
+        displaced,
     )  # fmt: skip
 
 
@@ -255,10 +274,11 @@ def assemble(
     or after it, is then placed at the nearest point of the path between the observations
     around it (its own included); a fix that did not enter the model (a stray, an outlier, a
     fix dropped to join a break) farther from that point than its search radius ``radius_m``
-    stays unmatched, as do fixes outside every piece. Fixes that entered the model have their
-    observation's confidence, the others the lower of their neighbours'. ``time_s`` is every
-    fix's time (NaN throughout without usable times): whether a car turning round had time to
-    reach a dead end's end is read from the gaps between fixes.
+    stays unmatched, as do fixes outside every piece; a fix of the model that the path holds
+    farther than its radius is unmatched and marked an outlier. Fixes that entered the model
+    have their observation's confidence, the others the lower of their neighbours'.
+    ``time_s`` is every fix's time (NaN throughout without usable times): whether a car turning
+    round had time to reach a dead end's end is read from the gaps between fixes.
     """
     a = net.arrays
     c, used, states = solution.cands, solution.used, solution.states
@@ -306,7 +326,7 @@ def assemble(
         (a.node_osm_id, a.edge_u, a.edge_v, a.edge_key),
     )
     placed, jumps, removed = _assemble_kernel(walk, place, loops)
-    (t_ptr, t_edge, t_lo, t_hi), first_fix, last_fix, per_fix = placed
+    (t_ptr, t_edge, t_lo, t_hi), first_fix, last_fix, per_fix, displaced = placed
     matched, in_model, edge, offset, confidence, segment_of, px, py, distance, u, v, key = per_fix
     segments = [
         Segment(
@@ -333,7 +353,7 @@ def assemble(
             confidence=confidence,
             segment=segment_of,
             interpolated=matched & ~in_model,
-            outlier=np.asarray(outlier, dtype=bool),
+            outlier=np.asarray(outlier, dtype=bool) | displaced,
         ),
         jumps=int(jumps),
         loops=int(removed),

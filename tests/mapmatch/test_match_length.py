@@ -15,8 +15,14 @@ import mapmatch
 import roadnets
 from mapmatch.evaluation.accuracy.conditions import columns_of, condition_config
 from mapmatch.evaluation.scoring import count_turnbacks, score_geojson
-from mapmatch.evaluation.simulate import SimulationConfig, simulate_trips, strip_to_class
+from mapmatch.evaluation.simulate import (
+    SimulationConfig,
+    simulate_trip,
+    simulate_trips,
+    strip_to_class,
+)
 from mapmatch.evaluation.simulate.columns import with_columns
+from mapmatch.hmm.candidates import search_radii
 from mapmatch.hmm.ends import moved_ends, odometer_fit
 from tests.mapmatch.toy import drive, load, lonlat, trace_of, write_osm
 
@@ -119,6 +125,27 @@ def test_no_filled_in_position_is_farther_than_the_search_radius(
         placed = points.matched & (points.interpolated | points.outlier)
         assert placed.any()
         assert (points.distance_m[placed] <= config.search_radius_m).all()
+
+
+def test_no_fix_is_held_farther_than_its_search_radius(default_net: roadnets.RoadNetwork) -> None:
+    # the accuracy matrix's Monaco 30s-20m trip 3 with accuracies: its path holds two fixes
+    # of the model 198 and 210 m from where they lie (80 m radius); they are reported as
+    # displaced, not as matched there
+    trip = simulate_trip(default_net, condition_config("30s-20m"), seed=1003)
+    trace = with_columns(trip.trace, columns_of("accuracy"))
+    config = mapmatch.MatchConfig()
+    result = mapmatch.match(trace, default_net, config)
+    points = result.points
+    radius = search_radii(trace.accuracy_m, len(trace), config)
+    assert (points.distance_m[points.matched] <= radius[points.matched]).all()
+    displaced = ~points.matched & ~points.interpolated & points.outlier
+    assert displaced.any()
+    assert np.isnan(points.lon[displaced]).all()
+    assert (points.segment[displaced] == -1).all()
+    segment = result.segments[0]
+    assert points.matched[segment.first]
+    assert points.matched[segment.last]
+    assert result.matched_length_m == pytest.approx(sum(s.length_m for s in result.segments))
 
 
 @pytest.mark.parametrize("extract", ["monaco", "aguascalientes_mx.osm.bz2"])
