@@ -10,9 +10,10 @@ held car's scatter of it or the time between them left the car time to get there
 
 Fixes left out of the model (a stopped car's repeats, outliers, fixes dropped to join a break)
 are placed at the nearest point of the path between their neighbours' positions; one whose
-nearest point is farther than its search radius stays unmatched. So does a fix of the model
-that the path holds farther than its search radius (a turn it cut short, a stop it merged):
-the path does not explain it, and the fix is reported as displaced, not placed.
+nearest point is farther than its search radius stays unmatched. A fix of the model that the
+path holds farther than its search radius (a loop or a spur taken out, a turn cut short, a
+crawl held as a stop) is placed as those are, between the fixes around it that the path
+explains; one still beyond its radius is unmatched too, and reported as displaced.
 """
 
 from __future__ import annotations
@@ -101,6 +102,45 @@ def _assemble_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - comp
         ids,
     )
     return placed, jumps.sum(), removed.sum()
+
+
+@njit(cache=True, nogil=True)
+def _replace_held(places, lower, fx, fy, radius, matched, in_model, confidence, path):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    Fixes of a piece that the path holds farther than their radius, placed as left-out ones.
+
+    A loop or a spur taken out of the path, or a crawl the model held as a stop, leaves its
+    fixes where the path was held, which can be hundreds of metres behind them while the path
+    itself drives past them. Each such fix moves to the nearest point of the path between the
+    fixes around it that the path does explain (``places``: every fix's distance along the
+    path, in order); there it is interpolated (out of the model, the lower of its neighbours'
+    confidence). One still beyond its radius stays where it was, and is left unmatched.
+    """
+    vx, vy, va = path
+    _, held_m = project_kernel(fx, fy, places, places, vx, vy, va)
+    far = matched & (held_m > radius)
+    if not far.any():
+        return
+    n = len(places)
+    for j in range(n):
+        if not far[j]:
+            continue
+        lo, hi = va[0], va[-1]
+        for q in range(j - 1, -1, -1):
+            if matched[q] and not far[q]:
+                lo = places[q]
+                break
+        for q in range(j + 1, n):
+            if matched[q] and not far[q]:
+                hi = places[q]
+                break
+        window_lo = np.array([min(lo, hi)])
+        window_hi = np.array([max(lo, hi)])
+        a, d = project_kernel(fx[j : j + 1], fy[j : j + 1], window_lo, window_hi, vx, vy, va)
+        if d[0] <= radius[j]:
+            places[j] = a[0]
+            in_model[j] = False
+            confidence[j] = lower[j]
 
 
 @njit(cache=True, nogil=True)
@@ -195,6 +235,8 @@ def _place(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
             after[j] = along[min(after_slot, size - 1)] if after_slot < size else along[size - 1]
         vx, vy, va = stretch_vertices(path_e, path_lo, path_hi, geom)
         placed, dist = project_kernel(fx[lo : hi + 1], fy[lo : hi + 1], before, after, vx, vy, va)
+        places = np.empty(k_fix)
+        lower = np.empty(k_fix)
         for j in range(k_fix):
             f = lo + j
             own = of_fix[f]
@@ -206,13 +248,18 @@ def _place(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
             if is_used and o_stop[own] - o_first[own] == 1:
                 a = along[at]  # a fix that is an observation of its own sits where the model put it
             near = member or dist[j] <= fradius[f]
-            f_edge[f], f_off[f] = _locate(path_e, path_lo, path_hi, a)
+            places[j] = a
             neighbour = min(max(slot, 1), max(size - 1, 1))
-            lower = min(post[start + neighbour - 1], post[start + min(neighbour, size - 1)])
-            confidence[f] = post[start + at] if member else lower
+            lower[j] = min(post[start + neighbour - 1], post[start + min(neighbour, size - 1)])
+            confidence[f] = post[start + at] if member else lower[j]
             matched[f] = near
             in_model[f] = member
             segment_of[f] = p if near else -1
+        _replace_held(places, lower, fx[lo : hi + 1], fy[lo : hi + 1], fradius[lo : hi + 1],
+                      matched[lo : hi + 1], in_model[lo : hi + 1], confidence[lo : hi + 1],
+                      (vx, vy, va))  # fmt: skip
+        for j in range(k_fix):
+            f_edge[lo + j], f_off[lo + j] = _locate(path_e, path_lo, path_hi, places[j])
     px = np.empty(n)
     py = np.empty(n)
     distance = np.full(n, np.nan)

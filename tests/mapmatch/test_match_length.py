@@ -148,6 +148,23 @@ def test_no_fix_is_held_farther_than_its_search_radius(default_net: roadnets.Roa
     assert result.matched_length_m == pytest.approx(sum(s.length_m for s in result.segments))
 
 
+@pytest.mark.parametrize(
+    ("condition", "seed", "held"), [("15s-10m", 1022, 13), ("30s-20m", 1006, 5)]
+)
+def test_a_held_fix_the_path_drives_past_is_placed_where_it_passes(
+    melbourne_net: roadnets.RoadNetwork, condition: str, seed: int, held: int
+) -> None:
+    # two of the accuracy matrix's Melbourne trips: the path held one fix of the model 57-65 m
+    # from where it lies while the path itself drives past it; it is placed on the path
+    # between the fixes around it (interpolated), within its search radius
+    trip = simulate_trip(melbourne_net, condition_config(condition), seed=seed)
+    config = mapmatch.MatchConfig()
+    points = mapmatch.match(with_columns(trip.trace, columns_of("positions")), melbourne_net).points
+    assert points.matched.all()
+    assert points.interpolated[held]
+    assert np.nanmax(points.distance_m) <= config.search_radius_m
+
+
 @pytest.mark.parametrize("extract", ["monaco", "aguascalientes_mx.osm.bz2"])
 def test_plain_gps_one_second_trips_stay_within_one_percent(
     extract: str, data_dir: Path, cache_dir: Path
