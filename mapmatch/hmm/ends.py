@@ -25,8 +25,10 @@ from mapmatch.result import MatchedPoints, Segment
 from roadnets.spatial_kernels import points_on_edges
 
 if TYPE_CHECKING:
+    from typing import Any
+
     from mapmatch.config import MatchConfig
-    from mapmatch.types import FloatArray
+    from mapmatch.types import FloatArray, IntArray
     from roadnets import RoadNetwork
 
 __all__ = ["moved_ends", "odometer_ends", "odometer_fit"]
@@ -148,6 +150,7 @@ def odometer_ends(
     points: MatchedPoints,
     odometer_m: FloatArray | None,
     config: MatchConfig,
+    radius_m: FloatArray | None = None,
 ) -> tuple[list[Segment], MatchedPoints]:
     """
     The segments with their ends where the odometer puts them, and the points with them.
@@ -158,6 +161,10 @@ def odometer_ends(
     (at least ``config.sigma_m``) and only along their own edge, never from or past a
     junction. Fixes left before the new start or past the new end move onto it. Without an
     odometer, or with ``odometer_end_sigmas`` 0, the segments and points come back as given.
+
+    With ``radius_m`` (every fix's search radius), no fix moves farther from itself than its
+    radius: one that would keeps its place where the path still runs through it, and is
+    otherwise left unmatched, an outlier, as assembly leaves a fix the path does not explain.
     """
     if odometer_m is None or config.odometer_end_sigmas <= 0 or not segments:
         return segments, points
@@ -165,6 +172,9 @@ def odometer_ends(
     model = points.matched & ~points.interpolated
     offset = points.offset_m.copy()
     moved = np.zeros(len(offset), dtype=bool)
+    # where the new path starts on each fix's edge, and ends (only the end edges have bounds)
+    path_lo = np.full(len(offset), -np.inf)
+    path_hi = np.full(len(offset), np.inf)
     out = []
     for seg in segments:
         lo, hi = seg.start_offset_m.copy(), seg.end_offset_m.copy()
@@ -186,6 +196,8 @@ def odometer_ends(
         every = span[points.matched[span] & (points.segment[span] == seg.index)]
         places = _along(seg.edge, seg.start_offset_m, seg.end_offset_m, points.edge[every],
                         offset[every])  # fmt: skip
+        path_lo[every[points.edge[every] == seg.edge[0]]] = lo[0]
+        path_hi[every[points.edge[every] == seg.edge[-1]]] = hi[-1]
         if shift:  # the fixes at the old start, and any the new start passed
             head = every[(places == places[0]) | (places < shift)]
             head = head[points.edge[head] == seg.edge[0]]
@@ -202,9 +214,48 @@ def odometer_ends(
     at = np.flatnonzero(moved)
     # the kernel itself: these edges and offsets are the path's own, nothing to check
     x, y = points_on_edges(points.edge[at], offset[at], *net.kernel_geometry)
-    lon, lat = points.lon.copy(), points.lat.copy()
-    lon[at], lat[at] = net.unproject(x, y)
     fx, fy = net.project(points.raw_lon[at], points.raw_lat[at])
+    moved_m = np.hypot(x - fx, y - fy)
+    far = np.zeros(len(at), dtype=bool) if radius_m is None else moved_m > radius_m[at]
+    old = points.offset_m[at]
+    kept = far & (old >= path_lo[at]) & (old <= path_hi[at])
+    offset[at[kept]] = old[kept]  # the path still runs through its old place: it stays there
+    go = ~far
+    lon, lat = points.lon.copy(), points.lat.copy()
+    lon[at[go]], lat[at[go]] = net.unproject(x[go], y[go])
     distance = points.distance_m.copy()
-    distance[at] = np.hypot(x - fx, y - fy)
-    return out, dataclasses.replace(points, offset_m=offset, lon=lon, lat=lat, distance_m=distance)
+    distance[at[go]] = moved_m[go]
+    placed = dataclasses.replace(points, offset_m=offset, lon=lon, lat=lat, distance_m=distance)
+    lost = at[far & ~kept]
+    if not len(lost):
+        return out, placed
+    return _unmatched(out, placed, lost, net)
+
+
+def _unmatched(
+    segments: list[Segment], points: MatchedPoints, lost: IntArray, net: RoadNetwork
+) -> tuple[list[Segment], MatchedPoints]:
+    """The points with the fixes ``lost`` unmatched outliers; the segments between those left."""
+    matched = points.matched.copy()
+    matched[lost] = False
+    outlier = points.outlier.copy()
+    outlier[lost] = True
+    off = {"edge": -1, "u": -1, "v": -1, "key": -1, "segment": -1, "offset_m": np.nan,
+           "distance_m": np.nan, "lon": np.nan, "lat": np.nan, "confidence": 0.0}  # fmt: skip
+    fields: dict[str, Any] = {"matched": matched, "outlier": outlier}
+    for name, value in off.items():
+        column = getattr(points, name).copy()
+        column[lost] = value
+        fields[name] = column
+    fields["interpolated"] = points.interpolated & matched
+    points = dataclasses.replace(points, **fields)
+    kept = []
+    for seg in segments:
+        on = np.flatnonzero(fields["segment"][seg.first : seg.last + 1] == seg.index) + seg.first
+        first, last = (int(on[0]), int(on[-1])) if len(on) else (seg.first, seg.last)
+        if (first, last) == (seg.first, seg.last):
+            kept.append(seg)
+            continue
+        lo, hi = seg.start_offset_m, seg.end_offset_m
+        kept.append(Segment(seg.index, first, last, seg.edge, lo, hi, net=net))
+    return kept, points

@@ -662,7 +662,9 @@ class OnlineMatcher:
         points = _slice_points(asm.points, open_first, stop)
         of = points.segment
         points = dataclasses.replace(points, segment=np.where(of >= 0, of + base_segment, -1))
-        self._record.add_points(points, _readings(model, open_first, stop))
+        self._record.add_points(
+            points, _readings(model, open_first, stop), model.fixes.radius_m[open_first:stop]
+        )
         out.points.append(points)
         self._count(rnd, ws, open_first, stop)
         self._segment = base_segment + piece
@@ -790,7 +792,9 @@ class OnlineMatcher:
                 return out
             stop = int(obs.stop[old[-1]])
         points = _unmatched_points(model, rnd.outlier[model.obs.of_fix], open_first, stop)
-        self._record.add_points(points, _readings(model, open_first, stop))
+        self._record.add_points(
+            points, _readings(model, open_first, stop), model.fixes.radius_m[open_first:stop]
+        )
         out.points.append(points)
         self._candidates += int(
             rnd.cands.counts[(obs.first >= open_first) & (obs.stop <= stop)].sum()
@@ -1005,7 +1009,12 @@ class OnlineMatcher:
             raise self._failure
         readings = self._record.odometer_m()
         segments, points = odometer_ends(
-            self.net, self._record.segments(self.net), self._record.points(), readings, self.config
+            self.net,
+            self._record.segments(self.net),
+            self._record.points(),
+            readings,
+            self.config,
+            self._record.radius_m(),
         )
         matched_length = float(sum(s.length_m for s in segments))
         span, complete, odometer = measured_span(

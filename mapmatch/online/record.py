@@ -65,6 +65,7 @@ class Record:
         self._paths: list[_Path] = []
         self._chunks: list[MatchedPoints] = []
         self._readings: list[FloatArray] = []  # the settled fixes' odometer (NaN: none)
+        self._radii: list[FloatArray] = []  # the settled fixes' search radius
         self.fixes = 0
         self.length_m = 0.0
         self.uturns = 0  # an edge followed by its reverse twin, within a segment
@@ -75,8 +76,10 @@ class Record:
         """Segments settled so far (the last may still grow)."""
         return len(self._paths)
 
-    def add_points(self, points: MatchedPoints, odometer_m: FloatArray | None) -> None:
-        """Append the outcome of the next settled fixes, and their odometer readings."""
+    def add_points(
+        self, points: MatchedPoints, odometer_m: FloatArray | None, radius_m: FloatArray
+    ) -> None:
+        """Append the outcome of the next settled fixes, their odometer readings and radii."""
         n = len(points.time_s)
         if not n:
             return
@@ -84,10 +87,12 @@ class Record:
             self.first_matched = bool(points.matched[0])
         self._chunks.append(points)
         self._readings.append(np.full(n, np.nan) if odometer_m is None else odometer_m.copy())
+        self._radii.append(np.array(radius_m, dtype=np.float64))
         self.fixes += n
         if len(self._chunks) > _COMPACT_CHUNKS:
             self._chunks = [concat_points(self._chunks)]
             self._readings = [np.concatenate(self._readings)]
+            self._radii = [np.concatenate(self._radii)]
 
     def add_path(
         self,
@@ -165,9 +170,15 @@ class Record:
         readings = self._readings[0] if self._readings else np.empty(0)
         return readings if np.isfinite(readings).any() else None
 
+    def radius_m(self) -> FloatArray:
+        """Every settled fix's search radius."""
+        self._radii = [np.concatenate(self._radii)] if self._radii else []
+        return self._radii[0] if self._radii else np.empty(0)
+
     @property
     def nbytes(self) -> int:
         """Bytes held (approximately: the arrays, and 24 bytes per stretch)."""
         arrays = sum(int(getattr(c, n).nbytes) for c in self._chunks for n in _POINT_FIELDS)
         arrays += sum(int(r.nbytes) for r in self._readings)
+        arrays += sum(int(r.nbytes) for r in self._radii)
         return arrays + sum(72 * len(p.edge) + 200 for p in self._paths) + 150 * len(self._chunks)

@@ -23,7 +23,7 @@ from mapmatch.evaluation.simulate import (
 )
 from mapmatch.evaluation.simulate.columns import with_columns
 from mapmatch.hmm.candidates import search_radii
-from mapmatch.hmm.ends import moved_ends, odometer_fit
+from mapmatch.hmm.ends import moved_ends, odometer_ends, odometer_fit
 from tests.mapmatch.toy import drive, load, lonlat, trace_of, write_osm
 
 if TYPE_CHECKING:
@@ -427,6 +427,36 @@ def test_the_odometer_moves_an_end_no_more_than_its_sigmas(tmp_path: Path) -> No
     at_fixes = mapmatch.match(trace, net, _AT_FIXES)
     fitted = mapmatch.match(trace, net)  # sigma 5 m: an end moves 10 m at most
     assert fitted.matched_length_m == pytest.approx(at_fixes.matched_length_m + 10.0, abs=0.5)
+
+
+@pytest.mark.parametrize("ends_off_m", [(8.0, -8.0), (-8.0, 8.0)])
+def test_the_odometer_moves_no_fix_beyond_its_search_radius(
+    tmp_path: Path, ends_off_m: tuple[float, float]
+) -> None:
+    net = _road(tmp_path)
+    trace = _sparse_drive_with_odometer(ends_off_m, 1.0)
+    at_fixes = mapmatch.match(trace, net, _AT_FIXES)
+    before = at_fixes.points
+    config = mapmatch.MatchConfig()
+    wide = np.full(len(trace), config.search_radius_m)
+    args = (net, at_fixes.segments, before, trace.odometer_m, config)
+    segments, points = odometer_ends(*args, wide)
+    assert abs(points.offset_m[-1] - before.offset_m[-1]) > 4.0  # the last fix moved
+    # a radius between the last fix's distance before and after the move
+    tight = wide.copy()
+    tight[-1] = (before.distance_m[-1] + points.distance_m[-1]) / 2
+    held_segments, held = odometer_ends(*args, tight)
+    length = sum(s.length_m for s in held_segments)
+    assert length == pytest.approx(sum(s.length_m for s in segments))  # the ends move all the same
+    matched = held.matched
+    assert (held.distance_m[matched] <= tight[matched]).all()
+    if ends_off_m[1] < 0:  # the end moved out: the path still runs through the fix's place
+        assert held.matched[-1]
+        assert held.offset_m[-1] == before.offset_m[-1]
+    else:  # the end moved back past it: the path does not explain it
+        assert not held.matched[-1]
+        assert held.outlier[-1]
+        assert held_segments[-1].last == len(trace) - 2
 
 
 def test_the_odometer_fit_leaves_out_what_does_not_follow_it() -> None:
