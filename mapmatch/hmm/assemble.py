@@ -45,7 +45,7 @@ if TYPE_CHECKING:
     from mapmatch.types import BoolArray, FloatArray
     from roadnets import RoadNetwork
 
-__all__ = ["Assembled", "assemble"]
+__all__ = ["Assembled", "assemble", "fixes_on_piece"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -102,6 +102,21 @@ def _assemble_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - comp
         ids,
     )
     return placed, jumps.sum(), removed.sum()
+
+
+@njit(cache=True, nogil=True)
+def fixes_on_piece(segment_of, first, last, piece):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """
+    ``first..last`` narrowed to the first and the last fix still on ``piece``.
+
+    ``segment_of`` is every fix's piece (-1: unmatched); a fix taken off the path at either
+    end no longer bounds it. Compiled, for :func:`_place`; callable from Python too.
+    """
+    while first < last and segment_of[first] != piece:
+        first += 1
+    while last > first and segment_of[last] != piece:
+        last -= 1
+    return first, last
 
 
 @njit(cache=True, nogil=True)
@@ -270,15 +285,16 @@ def _place(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     for f in range(n):
         e = f_edge[f] if matched[f] else 0
         px[f], py[f] = point_on_edge(e, f_off[f] if matched[f] else 0.0, *geom)
-        if matched[f] and np.hypot(px[f] - fx[f], py[f] - fy[f]) > fradius[f]:
-            # a fix of the model that the path holds (a turn it cut, a stop it merged) farther
-            # than its search radius: the path does not explain it, and it says so
+        away = np.hypot(px[f] - fx[f], py[f] - fy[f])
+        if matched[f] and away > fradius[f]:
+            # a fix of the model that the path holds farther than its search radius, where
+            # _replace_held found no place for it: the path does not explain it, and says so
             matched[f] = False
             displaced[f] = True
             in_model[f] = False
             segment_of[f] = -1
         if matched[f]:
-            distance[f] = np.hypot(px[f] - fx[f], py[f] - fy[f])
+            distance[f] = away
             u[f], v[f], key[f] = node_osm[edge_u[e]], node_osm[edge_v[e]], edge_key[e]
             confidence[f] = min(max(confidence[f], 0.0), 1.0)
         else:
@@ -286,12 +302,7 @@ def _place(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
             f_off[f] = np.nan
             confidence[f] = 0.0
     for p in range(n_pieces):  # each piece runs from its first to its last fix still on it
-        lo, hi = first_fix[p], last_fix[p]
-        while lo < hi and segment_of[lo] != p:
-            lo += 1
-        while hi > lo and segment_of[hi] != p:
-            hi -= 1
-        first_fix[p], last_fix[p] = lo, hi
+        first_fix[p], last_fix[p] = fixes_on_piece(segment_of, first_fix[p], last_fix[p], p)
     return (
         (t_ptr, t_edge[:m], t_lo[:m], t_hi[:m]),
         first_fix, last_fix,

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from mapmatch.hmm.assemble import fixes_on_piece
 from mapmatch.hmm.observations import sigma_of_distances
 from mapmatch.result import MatchedPoints, Segment
 from roadnets.spatial_kernels import points_on_edges
@@ -251,11 +252,10 @@ def _unmatched(
     points = dataclasses.replace(points, **fields)
     kept = []
     for seg in segments:
-        on = np.flatnonzero(fields["segment"][seg.first : seg.last + 1] == seg.index) + seg.first
-        first, last = (int(on[0]), int(on[-1])) if len(on) else (seg.first, seg.last)
+        first, last = fixes_on_piece(fields["segment"], seg.first, seg.last, seg.index)
         if (first, last) == (seg.first, seg.last):
             kept.append(seg)
             continue
         lo, hi = seg.start_offset_m, seg.end_offset_m
-        kept.append(Segment(seg.index, first, last, seg.edge, lo, hi, net=net))
+        kept.append(Segment(seg.index, int(first), int(last), seg.edge, lo, hi, net=net))
     return kept, points
