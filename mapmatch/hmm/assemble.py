@@ -350,11 +350,11 @@ def assemble(
     radius = np.ascontiguousarray(radius_m, f8)
     p_lo = np.array([start for start, _ in solution.pieces], dtype=np.int64)
     p_hi = np.array([stop for _, stop in solution.pieces], dtype=np.int64)
-    routes = solution.routes
+    record, record_state, record_pred = solution.route_records
     sigma = np.ascontiguousarray(obs.sigma_m, f8)
     walk = (
         (c.ptr, c.edge, c.offset_m, states, solution.kinds, p_lo, p_hi, used,
-         routes.record, routes.table.state, routes.table.pred),
+         record, record_state, record_pred),
         (obs.first, obs.stop, np.ascontiguousarray(obs.time_s, f8)),
         (x, y, radius, np.ascontiguousarray(time_s, f8)),
         travel_arrays(obs.travel),

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from mapmatch.hmm.candidates import Candidates
     from mapmatch.types import FloatArray, IntArray
-    from roadnets import EdgeRoutes
+    from roadnets.arrays import Int32Array
 
 __all__ = ["Solution"]
 
@@ -20,7 +20,9 @@ class Solution:
 
     ``states`` is the chosen candidate rank of each used fix (-1: none); ``pieces`` are
     ``(start, stop)`` ranges of *used* positions; ``kinds`` the route kind of every padded
-    transition; ``routes`` the routes the transitions were scored on (their edges);
+    transition; ``route_records`` the routes the transitions were scored on: each pair's
+    record (-1: no route), and every record's turn-graph state and predecessor record (the
+    search's own, or the precomputed table's), which give a route edge by edge;
     ``course_deg`` and ``pace_mps`` each observation's course and pace the candidates were
     chosen by (NaN: none).
     """
@@ -31,7 +33,7 @@ class Solution:
     pieces: list[tuple[int, int]]
     post: FloatArray
     kinds: IntArray
-    routes: EdgeRoutes
+    route_records: tuple[IntArray, Int32Array, Int32Array]
     log_emission: FloatArray
     log_transition: FloatArray
     course_deg: FloatArray

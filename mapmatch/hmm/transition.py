@@ -66,7 +66,7 @@ from roadnets.route_search import (
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
     from mapmatch.types import FloatArray, IntArray
-    from roadnets import EdgeRoutes, RoadNetwork
+    from roadnets import RoadNetwork
 
 __all__ = [
     "TABLE_FROM_MEAN_BOUND_M",
@@ -74,7 +74,6 @@ __all__ = [
     "driving_on_explains",
     "log_transition",
     "route_inputs",
-    "routes_found",
     "table_pays",
     "transition_score",
     "transitions_kernel",
@@ -274,7 +273,8 @@ def uturn_penalties(
 TABLE_FROM_MEAN_BOUND_M = 400.0
 
 
-def table_pays(bounds_m: FloatArray) -> bool:
+@njit(cache=True, nogil=True)
+def table_pays(bounds_m):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     """
     Whether routes searched with these bounds are answered faster from the route table.
 
@@ -283,8 +283,10 @@ def table_pays(bounds_m: FloatArray) -> bool:
     >>> table_pays(np.array([320.0, 340.0])), table_pays(np.array([600.0, 900.0]))
     (False, True)
     """
-    # their sum against the threshold's: np.mean's machinery costs several times more here
-    return len(bounds_m) > 0 and float(bounds_m.sum()) >= TABLE_FROM_MEAN_BOUND_M * len(bounds_m)
+    total = 0.0
+    for bound in bounds_m:
+        total += bound
+    return len(bounds_m) > 0 and total >= TABLE_FROM_MEAN_BOUND_M * len(bounds_m)
 
 
 @njit(cache=True, nogil=True)
@@ -557,15 +559,3 @@ def route_inputs(net: RoadNetwork) -> tuple[Any, ...]:
 
 #: Per thread, the last network's :func:`route_inputs` (a match reads them several times).
 _last_inputs = threading.local()
-
-
-def routes_found(net: RoadNetwork, ea: IntArray, eb: IntArray, out: tuple[Any, ...]) -> EdgeRoutes:
-    """The :class:`~roadnets.EdgeRoutes` of the forward routes :func:`transitions_kernel` took."""
-    from roadnets.routes import DEFAULT_UTURN_COST_M, EdgeRoutes, edge_routes_of
-
-    fits, searched, rec, dist, time, turns = out
-    if fits:
-        assert net.precomputed_routes is not None
-        return EdgeRoutes(ea, eb, dist, time, turns, rec, net.precomputed_routes)
-    found = (*searched, rec, dist, time, turns)
-    return edge_routes_of(net.turns, (DEFAULT_UTURN_COST_M, None, None), ea, eb, found)

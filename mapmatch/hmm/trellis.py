@@ -33,7 +33,7 @@ from mapmatch.hmm.params import (
 from mapmatch.hmm.pathwalk import EPS_M
 from mapmatch.hmm.routes import ARRIVAL_HELD, pairs_kernel, search_bound
 from mapmatch.hmm.solution import Solution
-from mapmatch.hmm.transition import route_inputs, routes_found, table_pays, transitions_kernel
+from mapmatch.hmm.transition import route_inputs, table_pays, transitions_kernel
 from mapmatch.hmm.viterbi import _posterior_kernel, viterbi_arrivals_kernel
 
 if TYPE_CHECKING:
@@ -175,9 +175,10 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     observation's :class:`Candidates`, ``obs`` the observations' ``(x, y, time, sigma,
     speed, heading)`` (heading empty when unknown), ``course`` their
     :func:`observation_courses`, ``travel`` their
-    :func:`~mapmatch.hmm.observations.travel_arrays`. Last in what it returns: each step's
-    route search bound (:func:`~mapmatch.hmm.routes.search_bound`), which tells whether the
-    precomputed route table pays (:func:`~mapmatch.hmm.transition.table_pays`).
+    :func:`~mapmatch.hmm.observations.travel_arrays`. Last in what it returns: each pair's
+    route record with the records' states and predecessors (:attr:`Solution.route_records`),
+    and whether the precomputed route table pays for the steps' route search bounds
+    (:func:`~mapmatch.hmm.routes.search_bound`, :func:`~mapmatch.hmm.transition.table_pays`).
     """
     graph, ws, scratch, uturn_cost_m, table = routing
     c_ptr, c_edge, c_off, c_dist, c_x, c_y, c_bear = cands
@@ -249,7 +250,7 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     else:
         travel_m, slack = np.empty(0), np.empty(0)
     heading = oheading[used] if has_heading else oheading
-    lt, kind, fits, searched, rec, r_dist, r_time, r_turns, moves = transitions_kernel(
+    lt, kind, fits, searched, rec, _, _, _, moves = transitions_kernel(
         graph, ws, scratch, uturn_cost_m, table, edge_speed,
         edge, off, dist, cx, cy, bear, ptr, step, a, b, bounds,
         step_m, dt, osigma[used], ox[used], oy[used], travel_m, slack, heading, ospeed[used],
@@ -298,11 +299,16 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
             kinds[t - 1, i, j] = move_kind[k]
     piece_lo, piece_hi = _pieces(states, starts)
     post = _posterior_kernel(em_pad, tr_pad, piece_lo, piece_hi)
+    # the routes' records, their states and predecessors: each pair's route edge by edge
+    if fits:
+        r_state, r_pred = table[3], table[10]
+    else:
+        r_state, r_pred = searched[3], searched[7].astype(np.int32)
     return (
         (ptr, edge, off, dist, cx, cy, bear),
         states, piece_lo, piece_hi, post, kinds, em_pad, tr_pad,
-        (fits, searched, rec, r_dist, r_time, r_turns),
-        edge[a], edge[b], step_bounds,
+        (rec, r_state, r_pred),
+        table_pays(step_bounds),
     )  # fmt: skip
 
 
@@ -331,11 +337,10 @@ def solve(
         pace = observation_paces(fixes, used)
     inputs = trace_inputs(fixes, all_cands, config)
     out = _solve_arrays(net, inputs, used, cut_after, course, pace)
-    cand_arrays, states, piece_lo, piece_hi, post, kinds, em_pad, tr_pad, found, ea, eb = out[:11]
+    cand_arrays, states, piece_lo, piece_hi, post, kinds, em_pad, tr_pad, records = out[:9]
     cands = Candidates(*cand_arrays)
     pieces = list(zip(piece_lo.tolist(), piece_hi.tolist(), strict=True))
-    routes = routes_found(net, ea, eb, found)
-    return Solution(used, cands, states, pieces, post, kinds, routes, em_pad, tr_pad, course, pace)
+    return Solution(used, cands, states, pieces, post, kinds, records, em_pad, tr_pad, course, pace)
 
 
 def trace_inputs(
@@ -389,8 +394,7 @@ def _solve_arrays(
         travel,
         params,
     )
-    bounds = out[11]  # each step's route search bound
-    if not net.route_table_requested and table_pays(bounds):
+    if out[9] and not net.route_table_requested:
         net.request_route_table()  # a sparse trace: the next ones may use the table
     return out
 
