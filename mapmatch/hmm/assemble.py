@@ -80,13 +80,20 @@ def _assemble_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - comp
     :func:`walk_pieces`, then :func:`_place` on its paths: one call (argument tuples of each).
 
     ``place[3]`` is the padded posterior of the solution; :func:`_place` is given the chosen
-    candidate's.
+    candidate's. ``place[7]`` the candidates' distances, of which the chosen ones give the
+    scatter the fixes show (:func:`~mapmatch.hmm.loops.chosen_scatter_kernel`), which
+    ``loops`` and ``_place`` are given last.
     """
     solution, obs, fixes, travel, net, routing, hold_limit = walk
-    row_ptr, w_edge, w_lo, w_hi, along, jumps, removed = walk_pieces(
-        solution, obs, fixes, travel, net, routing, hold_limit, loops
+    chosen_m, scatter = chosen_scatter_kernel(
+        solution[0], place[7], solution[3], solution[7], obs[0], obs[1]
     )
-    pieces, obs_place, fix_place, post_pad, thinning, geom, ids = place
+    log_em, ox, oy, sigma, params, loop_penalty, loop_net = loops
+    row_ptr, w_edge, w_lo, w_hi, along, jumps, removed = walk_pieces(
+        solution, obs, fixes, travel, net, routing, hold_limit,
+        (log_em, ox, oy, sigma, params, loop_penalty, loop_net, scatter, chosen_m),
+    )  # fmt: skip
+    pieces, obs_place, fix_place, post_pad, thinning, geom, ids, _ = place
     states = solution[3]
     post = np.empty(len(states))
     for i in range(len(states)):
@@ -97,7 +104,7 @@ def _assemble_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - comp
         obs_place,
         fix_place,
         post,
-        thinning,
+        (thinning[0], thinning[1], scatter),
         geom,
         ids,
     )
@@ -170,9 +177,10 @@ def _place(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     stop, of_fix, stray, sigma)``, ``fix`` every fix's ``(x, y, radius, outlier)``, ``post``
     the chosen candidate's posterior per used observation, ``ids`` ``(node_osm_id, edge_u,
     edge_v, edge_key)``. Returns the trimmed rows ``(row_ptr, edge, lo, hi)``, each piece's
-    first and last fix, and per fix ``(matched, in_model, edge, offset, confidence,
-    segment, x, y, distance, u, v, key)`` (the position at edge 0 for unmatched fixes), and
-    which fixes of the model the path holds farther than their search radius (unmatched).
+    first and last fix, and per fix ``(matched, interpolated, edge, offset, confidence,
+    segment, x, y, distance, u, v, key)`` (interpolated: matched but not a fix of the model;
+    position NaN for unmatched fixes), and the outliers: those given, and the fixes of the
+    model the path holds farther than their search radius (unmatched).
     """
     row_ptr, w_edge, w_lo, w_hi, along_all = walked
     p_lo, p_hi, used = pieces
@@ -303,11 +311,19 @@ def _place(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
             confidence[f] = 0.0
     for p in range(n_pieces):  # each piece runs from its first to its last fix still on it
         first_fix[p], last_fix[p] = fixes_on_piece(segment_of, first_fix[p], last_fix[p], p)
+    interpolated = np.empty(n, dtype=np.bool_)
+    flagged = np.empty(n, dtype=np.bool_)
+    for f in range(n):
+        interpolated[f] = matched[f] and not in_model[f]
+        flagged[f] = outlier[f] or displaced[f]
+        if not matched[f]:
+            px[f] = np.nan
+            py[f] = np.nan
     return (
         (t_ptr, t_edge[:m], t_lo[:m], t_hi[:m]),
         first_fix, last_fix,
-        (matched, in_model, f_edge, f_off, confidence, segment_of, px, py, distance, u, v, key),
-        displaced,
+        (matched, interpolated, f_edge, f_off, confidence, segment_of, px, py, distance, u, v, key),
+        flagged,
     )  # fmt: skip
 
 
@@ -341,9 +357,6 @@ def assemble(
     a = net.arrays
     c, used, states = solution.cands, solution.used, solution.states
     geom = network_geometry(net)
-    chosen_m, scatter = chosen_scatter_kernel(
-        c.ptr, c.distance_m, states, used, obs.first, obs.stop
-    )
     f8 = np.float64
     x = np.ascontiguousarray(x, f8)
     y = np.ascontiguousarray(y, f8)
@@ -371,21 +384,22 @@ def assemble(
         model_params(config),
         float(config.loop_penalty),
         loop_network(net),
-        scatter,
-        chosen_m,
     )
     place = (
         (p_lo, p_hi, used),
         (obs.first, obs.stop, obs.of_fix, obs.stray, sigma),
         (x, y, radius, np.ascontiguousarray(outlier, np.bool_)),
         np.ascontiguousarray(solution.post, f8),
-        (float(config.thinning_sigmas), float(config.standstill_m), scatter),
+        (float(config.thinning_sigmas), float(config.standstill_m)),
         geom,
         (a.node_osm_id, a.edge_u, a.edge_v, a.edge_key),
+        c.distance_m,
     )
     placed, jumps, removed = _assemble_kernel(walk, place, loops)
-    (t_ptr, t_edge, t_lo, t_hi), first_fix, last_fix, per_fix, displaced = placed
-    matched, in_model, edge, offset, confidence, segment_of, px, py, distance, u, v, key = per_fix
+    (t_ptr, t_edge, t_lo, t_hi), first_fix, last_fix, per_fix, flagged = placed
+    matched, interpolated, edge, offset, confidence, segment_of, px, py, distance, u, v, key = (
+        per_fix
+    )
     segments = [
         Segment(
             p, int(first_fix[p]), int(last_fix[p]), t_edge[lo:hi], t_lo[lo:hi], t_hi[lo:hi], net=net
@@ -406,12 +420,12 @@ def assemble(
             key=key,
             offset_m=offset,
             distance_m=distance,
-            lon=np.where(matched, lon, np.nan),
-            lat=np.where(matched, lat, np.nan),
+            lon=lon,
+            lat=lat,
             confidence=confidence,
             segment=segment_of,
-            interpolated=matched & ~in_model,
-            outlier=np.asarray(outlier, dtype=bool) | displaced,
+            interpolated=interpolated,
+            outlier=flagged,
         ),
         jumps=int(jumps),
         loops=int(removed),
