@@ -361,8 +361,7 @@ def assemble(
     x = np.ascontiguousarray(x, f8)
     y = np.ascontiguousarray(y, f8)
     radius = np.ascontiguousarray(radius_m, f8)
-    p_lo = np.array([start for start, _ in solution.pieces], dtype=np.int64)
-    p_hi = np.array([stop for _, stop in solution.pieces], dtype=np.int64)
+    p_lo, p_hi = solution.piece_start, solution.piece_stop
     record, record_state, record_pred = solution.route_records
     sigma = np.ascontiguousarray(obs.sigma_m, f8)
     walk = (

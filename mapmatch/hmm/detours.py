@@ -124,12 +124,11 @@ def _best_paths(solution: Solution) -> tuple[FloatArray, FloatArray]:
     the rest of the piece after it (emission of ``t`` excluded). Max-product over the solved
     trellis' emissions and transitions (compiled: :func:`_best_paths_kernel`).
     """
-    bounds = np.asarray(solution.pieces, dtype=np.int64).reshape(-1, 2)
     ahead, behind = _best_paths_kernel(
         np.ascontiguousarray(solution.log_emission, dtype=np.float64),
         np.ascontiguousarray(solution.log_transition, dtype=np.float64),
-        np.ascontiguousarray(bounds[:, 0]),
-        np.ascontiguousarray(bounds[:, 1]),
+        solution.piece_start,
+        solution.piece_stop,
     )
     return ahead, behind
 
@@ -275,14 +274,13 @@ def drop_detour_fixes(
         # can start and end far from it. A piece's ends are left alone: leaving one out
         # drops its transition with nothing to bridge it (a 30 s step round a hairpin costs
         # 20 nats on the noise-free truth), and the end tests judge them
-        pieces = np.asarray(solution.pieces, dtype=np.int64).reshape(-1, 2)
         f8, i8 = np.float64, np.int64  # one compiled signature (no copies: they are so)
         tried, drops, bounds, bests, ahead, behind = _tries_kernel(
             np.ascontiguousarray(solution.states, i8),
             np.ascontiguousarray(solution.log_emission, f8),
             np.ascontiguousarray(solution.log_transition, f8),
-            np.ascontiguousarray(pieces[:, 0]),
-            np.ascontiguousarray(pieces[:, 1]),
+            solution.piece_start,
+            solution.piece_stop,
             np.ascontiguousarray(used, i8),
             np.ascontiguousarray(obs.x, f8),
             np.ascontiguousarray(obs.y, f8),
@@ -326,7 +324,7 @@ def drop_detour_fixes(
         kept = np.delete(used, drop)
         trial = solve(net, obs, cands, kept, cuts(kept, missing_before), config)
         gained = path_score(trial) - path_score(solution) > nats
-        if not gained or len(trial.pieces) > len(solution.pieces):
+        if not gained or len(trial.piece_start) > len(solution.piece_start):
             break
         # the gain must not come from moving the other fixes off their roads (the emission
         # floor makes a wrong road cheap for a fix or two)

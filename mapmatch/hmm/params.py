@@ -15,7 +15,7 @@ if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
     from mapmatch.types import FloatArray
 
-__all__ = ["PARAMS", "model_params"]
+__all__ = ["PARAMS", "model_params", "params_of"]
 
 #: The fields of :class:`~mapmatch.config.MatchConfig` in the parameter array, in order.
 PARAMS = (
@@ -83,12 +83,37 @@ PARAMS = (
     P_SERVICE_SPEED,
 ) = range(len(PARAMS))
 
-_CACHE: dict[int, tuple[MatchConfig, FloatArray]] = {}
+_CACHE: dict[tuple[int, tuple[str, ...]], tuple[MatchConfig, FloatArray]] = {}
+
+
+def params_of(config: MatchConfig, names: tuple[str, ...]) -> FloatArray:
+    """
+    The values of the fields ``names`` of ``config``, in that order, as one float array.
+
+    Made once per configuration object and list of names, read-only: the kernels read their
+    parameters from such arrays, and a match asks for them several times.
+
+    Examples
+    --------
+    >>> from mapmatch.config import MatchConfig
+    >>> params_of(MatchConfig(beta_m=4.0), ("beta_m", "sigma_m")).tolist()
+    [4.0, 5.0]
+    """
+    key = (id(config), names)
+    found = _CACHE.get(key)
+    if found is not None and found[0] is config:
+        return found[1]
+    params = np.array([float(getattr(config, name)) for name in names], dtype=np.float64)
+    params.flags.writeable = False
+    if len(_CACHE) >= 64:
+        _CACHE.pop(next(iter(_CACHE)))
+    _CACHE[key] = (config, params)
+    return params
 
 
 def model_params(config: MatchConfig) -> FloatArray:
     """
-    The parameter array of ``config`` (made once per configuration object, read-only).
+    The parameter array of ``config``: :func:`params_of` the :data:`PARAMS`.
 
     Examples
     --------
@@ -96,12 +121,4 @@ def model_params(config: MatchConfig) -> FloatArray:
     >>> float(model_params(MatchConfig(beta_m=4.0))[P_BETA_M])
     4.0
     """
-    found = _CACHE.get(id(config))
-    if found is not None and found[0] is config:
-        return found[1]
-    params = np.array([float(getattr(config, name)) for name in PARAMS], dtype=np.float64)
-    params.flags.writeable = False
-    if len(_CACHE) >= 64:
-        _CACHE.pop(next(iter(_CACHE)))
-    _CACHE[id(config)] = (config, params)
-    return params
+    return params_of(config, PARAMS)

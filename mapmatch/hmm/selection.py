@@ -12,6 +12,7 @@ import numpy as np
 from numba import njit
 
 from mapmatch.hmm.observations import between_kernel, travel_arrays
+from mapmatch.hmm.params import params_of
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -27,20 +28,21 @@ __all__ = ["find_displaced", "find_off_road_runs", "find_outliers"]
 _BACKED_FIXES = 3
 
 
+#: The outlier parameters, in the order the kernels read them.
+_OUTLIER_PARAMS = (
+    "outlier_sigmas",
+    "outlier_max_gap_s",
+    "outlier_detour_ratio",
+    "max_emission_penalty",
+    "outlier_max_run",
+    "travel_accel_mps2",
+    "end_outlier_sigmas",
+)
+
+
 def _params(config: MatchConfig) -> FloatArray:
-    """The outlier parameters, in the order the kernels read them."""
-    return np.array(
-        [
-            config.outlier_sigmas,
-            config.outlier_max_gap_s,
-            config.outlier_detour_ratio,
-            config.max_emission_penalty,
-            config.outlier_max_run,
-            config.travel_accel_mps2,
-            config.end_outlier_sigmas,
-        ],
-        dtype=np.float64,
-    )
+    """The outlier parameters of ``config`` (:data:`_OUTLIER_PARAMS`), made once per config."""
+    return params_of(config, _OUTLIER_PARAMS)
 
 
 @njit(cache=True, nogil=True)

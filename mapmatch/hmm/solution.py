@@ -18,11 +18,12 @@ class Solution:
     """
     The HMM solved over a subset of fixes (``used``, indices into the trace).
 
-    ``states`` is the chosen candidate rank of each used fix (-1: none); ``pieces`` are
-    ``(start, stop)`` ranges of *used* positions; ``kinds`` the route kind of every padded
-    transition; ``route_records`` the routes the transitions were scored on: each pair's
-    record (-1: no route), and every record's turn-graph state and predecessor record (the
-    search's own, or the precomputed table's), which give a route edge by edge;
+    ``states`` is the chosen candidate rank of each used fix (-1: none); the pieces are the
+    ranges ``piece_start[i]:piece_stop[i]`` of *used* positions (:attr:`pieces`); ``kinds``
+    the route kind of every padded transition; ``route_records`` the routes the transitions
+    were scored on: each pair's record (-1: no route), and every record's turn-graph state
+    and predecessor record (the search's own, or the precomputed table's), which give a
+    route edge by edge;
     ``course_deg`` and ``pace_mps`` each observation's course and pace the candidates were
     chosen by (NaN: none).
     """
@@ -30,7 +31,8 @@ class Solution:
     used: IntArray
     cands: Candidates
     states: IntArray
-    pieces: list[tuple[int, int]]
+    piece_start: IntArray
+    piece_stop: IntArray
     post: FloatArray
     kinds: IntArray
     route_records: tuple[IntArray, Int32Array, Int32Array]
@@ -40,6 +42,12 @@ class Solution:
     pace_mps: FloatArray
 
     @property
+    def pieces(self) -> list[tuple[int, int]]:
+        """The pieces' ``(start, stop)`` ranges of used positions."""
+        return list(zip(self.piece_start.tolist(), self.piece_stop.tolist(), strict=True))
+
+    @property
     def breaks(self) -> list[int]:
         """Used positions where a new piece starts."""
-        return [start for start, _ in self.pieces[1:]]
+        starts: list[int] = self.piece_start[1:].tolist()
+        return starts

@@ -339,8 +339,9 @@ def solve(
     out = _solve_arrays(net, inputs, used, cut_after, course, pace)
     cand_arrays, states, piece_lo, piece_hi, post, kinds, em_pad, tr_pad, records = out[:9]
     cands = Candidates(*cand_arrays)
-    pieces = list(zip(piece_lo.tolist(), piece_hi.tolist(), strict=True))
-    return Solution(used, cands, states, pieces, post, kinds, records, em_pad, tr_pad, course, pace)
+    return Solution(
+        used, cands, states, piece_lo, piece_hi, post, kinds, records, em_pad, tr_pad, course, pace
+    )
 
 
 def trace_inputs(
