@@ -39,7 +39,9 @@ from itertools import accumulate, pairwise
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -163,15 +165,30 @@ def _put_null(out, at):  # type: ignore[no-untyped-def]  # pragma: no cover
     return at + 4
 
 
+@intrinsic
+def _memcpy(typingctx, out, at, source, start, size):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """``out[at:at + size] = source[start:start + size]`` as one ``memcpy`` (C-contiguous bytes)."""
+    if not all(isinstance(a, types.Array) and a.layout == "C" for a in (out, source)):
+        return None
+    sig = types.void(out, at, source, start, size)
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+        out_v, at_v, source_v, start_v, size_v = args
+        into = context.make_array(signature.args[0])(context, builder, out_v)
+        part = context.make_array(signature.args[2])(context, builder, source_v)
+        into_at = builder.gep(into.data, [at_v])
+        part_at = builder.gep(part.data, [start_v])
+        cgutils.raw_memcpy(builder, into_at, part_at, size_v, 1)  # type: ignore[no-untyped-call]
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
 @njit(cache=True, nogil=True, inline="always")
 def _put_bytes(out, at, source, start, end):  # type: ignore[no-untyped-def]  # pragma: no cover
     """Copy ``source[start:end]`` to ``out[at:]``; return the end."""
     size = end - start
-    # between views indexed from 0 (no negative index to wrap): three times the bytes a second
-    into = out[at : at + size]
-    part = source[start:end]
-    for j in range(size):
-        into[j] = part[j]
+    _memcpy(out, at, source, start, size)  # type: ignore[call-arg]  # the typing context is numba's
     return at + size
 
 
