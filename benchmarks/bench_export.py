@@ -11,11 +11,13 @@ fixes and a 15 s trace, each median of ``--repeats`` rounds of ``--loops`` calls
 
     .venv/bin/python benchmarks/bench_export.py [--network PATH] [--repeats 5] [--loops 50]
 
-Prints one markdown table, milliseconds per call: the match itself; ``to_geojson()`` (the
-dict) before and after; the GeoJSON text (legacy: the dict + compact ``json.dumps``; now
-:func:`mapmatch.export.geojson_bytes`); the whole call a user makes (match + text, on a
-fresh result, so the lazily made geometry and attributes are paid for); and the per-point
-and per-edge tables.
+Prints two markdown tables, milliseconds per call. The first: the match itself;
+``to_geojson()`` (the dict) before and after; the GeoJSON text (legacy: the dict + compact
+``json.dumps``; now :func:`mapmatch.export.geojson_bytes`); the whole call a user makes
+(match + text, on a fresh result, so the lazily made geometry and attributes are paid for);
+and the per-point and per-edge tables. The second: :func:`mapmatch.export.geojson_bytes`
+alone per trace on traces of 2, 12, 30 and 300 fixes (CPU time, minimum of the rounds),
+where the small ones show what every document costs whatever its size.
 """
 
 from __future__ import annotations
@@ -159,7 +161,52 @@ def main() -> int:
             print(f"{label}: the legacy fields differ from geojson_bytes", file=sys.stderr)
             return 1
         print(row, flush=True)
+    print(
+        "\nGeoJSON text per trace, by trace size (geojson_bytes on a matched result; CPU time, "
+        f"min of {args.repeats} rounds of {args.loops} calls over {len(SEEDS)} trips, ms)\n"
+    )
+    print("| interval | fixes | edges (mean) | bytes (mean) | geojson_bytes ms/trace |")
+    print("|---|---:|---:|---:|---:|")
+    for interval, noise, fixes in SIZES:
+        print(_per_trace_row(net, interval, noise, fixes, args.repeats, args.loops), flush=True)
     return 0
+
+
+#: Trace sizes of the per-trace table: small sparse traces (where the fixed cost of a
+#: document shows) up to a long 1 Hz one.
+SIZES = ((30.0, 20.0, 2), (30.0, 20.0, 12), (15.0, 10.0, 30), (1.0, 5.0, 300))
+SEEDS = (11, 12, 13, 14, 15)
+
+
+def _per_trace_row(
+    net: RoadNetwork, interval: float, noise: float, fixes: int, n: int, k: int
+) -> str:
+    """One row of the per-trace table: ``geojson_bytes`` of a few trips of ``fixes`` fixes."""
+    import mapmatch
+    from mapmatch import export
+    from mapmatch.evaluation.simulate import SimulationConfig, simulate_trip
+
+    cfg = SimulationConfig(
+        interval_s=interval, noise_m=noise, route_length_m=(fixes + 2) * 12.0 * interval
+    )
+    results = []
+    for seed in SEEDS:
+        trace = simulate_trip(net, cfg, seed=seed, trace_id=f"size-{fixes}").trace
+        results.append(mapmatch.match(trace.slice(0, min(fixes, len(trace))), net))
+    sizes = [len(export.geojson_bytes(r)) for r in results]  # also makes the lazy geometry
+    best = math.inf
+    for _ in range(n):
+        started = time.process_time()
+        for _ in range(k):
+            for r in results:
+                export.geojson_bytes(r)
+        best = min(best, (time.process_time() - started) / k / len(results))
+    points = statistics.mean(len(r.points.time_s) for r in results)
+    edges = statistics.mean(sum(len(s.edge) for s in r.segments) for r in results)
+    return (
+        f"| {interval:g} s | {points:.0f} | {edges:.1f} | {statistics.mean(sizes):,.0f} "
+        f"| {1000.0 * best:.3f} |"
+    )
 
 
 def _bench_set(

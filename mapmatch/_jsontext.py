@@ -39,7 +39,9 @@ from itertools import accumulate, pairwise
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -58,6 +60,7 @@ __all__ = [
     "Table",
     "Tuple",
     "chained_ascii",
+    "chained_pieces",
     "py_round",
 ]
 
@@ -163,15 +166,30 @@ def _put_null(out, at):  # type: ignore[no-untyped-def]  # pragma: no cover
     return at + 4
 
 
+@intrinsic
+def _memcpy(typingctx, out, at, source, start, size):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """``out[at:at + size] = source[start:start + size]`` as one ``memcpy`` (C-contiguous bytes)."""
+    if not all(isinstance(a, types.Array) and a.layout == "C" for a in (out, source)):
+        return None
+    sig = types.void(out, at, source, start, size)
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+        out_v, at_v, source_v, start_v, size_v = args
+        into = context.make_array(signature.args[0])(context, builder, out_v)
+        part = context.make_array(signature.args[2])(context, builder, source_v)
+        into_at = builder.gep(into.data, [at_v])
+        part_at = builder.gep(part.data, [start_v])
+        cgutils.raw_memcpy(builder, into_at, part_at, size_v, 1)  # type: ignore[no-untyped-call]
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
 @njit(cache=True, nogil=True, inline="always")
 def _put_bytes(out, at, source, start, end):  # type: ignore[no-untyped-def]  # pragma: no cover
     """Copy ``source[start:end]`` to ``out[at:]``; return the end."""
     size = end - start
-    # between views indexed from 0 (no negative index to wrap): three times the bytes a second
-    into = out[at : at + size]
-    part = source[start:end]
-    for j in range(size):
-        into[j] = part[j]
+    _memcpy(out, at, source, start, size)  # type: ignore[call-arg]  # the typing context is numba's
     return at + size
 
 
@@ -592,12 +610,13 @@ class _Writer:
         """Write table ``index`` of a :class:`_Chain`."""
         table.write(self)
 
-    def run(self, sep: int) -> tuple[bytes, IntArray, list[tuple[int, int, str]]]:
+    def run(self, sep: int) -> tuple[memoryview, IntArray, list[tuple[int, int, str]]]:
         """
         Write the rows.
 
-        Returns the rows' text (separated by the byte ``sep``, none if negative), where each
-        row starts, and the ``(position, row, text)`` of each number ``repr`` writes instead.
+        Returns the rows' text (separated by the byte ``sep``, none if negative; a view of the
+        written buffer, not copied), where each row starts, and the ``(position, row, text)``
+        of each number ``repr`` writes instead.
         """
         self._flush()
         program = _program(tuple(self.ops))
@@ -611,7 +630,7 @@ def _render(
     ints: list[Any],
     texts: list[list[str]],
     sep: int,
-) -> tuple[bytes, IntArray, list[tuple[int, int, str]]]:
+) -> tuple[memoryview, IntArray, list[tuple[int, int, str]]]:
     """:meth:`_Writer.run` of a program and the arrays it reads."""
     ops, lit, lit_at = program
     flat_floats, floats_at = _flat(floats, np.float64)
@@ -626,7 +645,7 @@ def _render(
         if len(slow)
         else []
     )
-    return out.tobytes(), row_at, fixes
+    return memoryview(out), row_at, fixes
 
 
 def _flat(columns: list[Any], dtype: type) -> tuple[Any, IntArray]:
@@ -792,7 +811,7 @@ _PLANS: dict[str, _Plan] = {}
 
 def _planned(
     table: Table | _Chain, schema: str, sep: int
-) -> tuple[bytes, IntArray, list[tuple[int, int, str]]]:
+) -> tuple[memoryview, IntArray, list[tuple[int, int, str]]]:
     """:meth:`_Writer.run` of ``table`` by its schema's plan (made on the first table)."""
     plan = _PLANS.get(schema)
     if plan is not None:
@@ -850,23 +869,28 @@ def _each(write: Any, rows: int) -> list[str]:
     by_row: dict[int, list[tuple[int, int, str]]] = {}
     for fix in fixes:
         by_row.setdefault(fix[1], []).append(fix)
-    cells = [text[a:b] for a, b in pairwise(row_at)]
+    cells: list[bytes | memoryview] = [text[a:b] for a, b in pairwise(row_at)]
     for r, row_fixes in by_row.items():
-        cells[r] = _spliced(cells[r], row_fixes, row_at[r])
-    return [cell.decode("ascii") for cell in cells]
+        cells[r] = b"".join(_pieces(text[row_at[r] : row_at[r + 1]], row_fixes, row_at[r]))
+    return [str(cell, "ascii") for cell in cells]
 
 
-def _spliced(text: bytes, fixes: list[tuple[int, int, str]], start: int) -> bytes:
-    """``text`` (which starts at ``start``) with each fix's text inserted at its position."""
-    if not fixes:
-        return text
-    parts: list[bytes] = []
+def _pieces(
+    text: memoryview, fixes: list[tuple[int, int, str]], start: int = 0
+) -> list[bytes | memoryview]:
+    """
+    ``text`` (which starts at ``start``) with each fix's text inserted at its position.
+
+    As the pieces to join (views of ``text``, not copied): joined with what surrounds them,
+    the written buffer is copied once.
+    """
+    parts: list[bytes | memoryview] = []
     done = 0
     for at, _, fix in fixes:
         parts += (text[done : at - start], fix.encode("ascii"))
         done = at - start
     parts.append(text[done:])
-    return b"".join(parts)
+    return parts
 
 
 @dataclass(slots=True)  # not frozen: a document makes some fifty, a frozen one costs 3x
@@ -1117,7 +1141,7 @@ class Table:
             writer = _Writer(self.rows)
             self.write(writer)
             text, _, fixes = writer.run(ord(","))
-        return _spliced(text, fixes, 0)
+        return b"".join(_pieces(text, fixes))
 
     def text(self) -> str:
         """:meth:`ascii` as a string."""
@@ -1153,7 +1177,8 @@ def chained_ascii(tables: Sequence[Table], schema: str | None = None) -> bytes:
     """
     The rows' objects of several tables one after another, joined by commas, ASCII.
 
-    ``b",".join(t.ascii() for t in tables if t.rows)``, written by one compiled call.
+    ``b",".join(t.ascii() for t in tables if t.rows)``, written by one compiled call
+    (:func:`chained_pieces` joined).
 
     Parameters
     ----------
@@ -1170,6 +1195,29 @@ def chained_ascii(tables: Sequence[Table], schema: str | None = None) -> bytes:
     >>> chained_ascii([segments, points, points])
     b'{"kind":"point","n":7},{"kind":"point","n":8},{"kind":"point","n":7},{"kind":"point","n":8}'
     """
+    return b"".join(chained_pieces(tables, schema))
+
+
+def chained_pieces(tables: Sequence[Table], schema: str | None = None) -> list[bytes | memoryview]:
+    """
+    :func:`chained_ascii` as the pieces to join, views of the written buffer (not copied).
+
+    ``b"".join((before, *pieces, after))`` copies the text once, whatever surrounds it.
+
+    Parameters
+    ----------
+    tables
+        The tables, in order.
+    schema
+        A name for chains made by the same code every time (see :class:`Table`): the walk
+        over the columns of the first chain of a schema is kept for the later ones.
+
+    Examples
+    --------
+    >>> points = Table(2, [("kind", Const("point")), ("n", Ints(np.array([7, 8])))])
+    >>> b"".join((b"[", *chained_pieces([points]), b"]"))
+    b'[{"kind":"point","n":7},{"kind":"point","n":8}]'
+    """
     chain = _Chain(tables)
     if schema is not None:
         text, _, fixes = _planned(chain, schema, -1)
@@ -1177,7 +1225,7 @@ def chained_ascii(tables: Sequence[Table], schema: str | None = None) -> bytes:
         writer = _Writer(1)
         chain.write(writer)
         text, _, fixes = writer.run(-1)
-    return _spliced(text, fixes, 0)
+    return _pieces(text, fixes)
 
 
 #: How :meth:`_Writer.column` writes each kind of column this module knows (in the program;

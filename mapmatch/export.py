@@ -27,6 +27,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from itertools import accumulate
+from json.encoder import c_make_encoder, encode_basestring_ascii  # type: ignore[attr-defined]
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
@@ -41,7 +42,7 @@ from mapmatch._jsontext import (
     Strings,
     Table,
     Tuple,
-    chained_ascii,
+    chained_pieces,
 )
 from mapmatch._timing import (
     EdgeTimes,
@@ -54,6 +55,7 @@ from mapmatch._timing import (
 from mapmatch.result import EdgeAttributes
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
     from pathlib import Path
 
     import geopandas as gpd  # type: ignore[import-untyped]
@@ -338,8 +340,23 @@ def _segment_times(edges: EdgeTable, bounds: IntArray) -> tuple[FloatArray, Floa
     return start, end
 
 
-#: ``json.dumps(value, allow_nan=False, separators=(",", ":"))``, the encoder made once.
-_COMPACT = json.JSONEncoder(allow_nan=False, separators=(",", ":")).encode
+def _compact_encoder() -> Callable[[Any], str]:
+    """
+    ``json.dumps(value, allow_nan=False, separators=(",", ":"))``, the encoder made once.
+
+    The C encoder itself where there is one (``JSONEncoder.encode`` makes a new one every
+    call), without the check for circular references: what it encodes is made here.
+    """
+    encoder = json.JSONEncoder(allow_nan=False, separators=(",", ":"))
+    if c_make_encoder is None:  # pragma: no cover  # CPython has it
+        return encoder.encode
+    chunks = c_make_encoder(
+        None, encoder.default, encode_basestring_ascii, None, ":", ",", False, False, False
+    )
+    return lambda value: "".join(chunks(value, 0))
+
+
+_COMPACT = _compact_encoder()
 
 
 def _head(result: MatchResult) -> dict[str, Any]:
@@ -375,8 +392,8 @@ def geojson_bytes(result: MatchResult) -> bytes:
         points).
     """
     head = _COMPACT(_head(result))
-    features = chained_ascii(_feature_tables(result), schema="geojson-features")
-    return b"".join((head[:-1].encode("ascii"), b',"features":[', features, b"]}"))
+    features = chained_pieces(_feature_tables(result), schema="geojson-features")
+    return b"".join((head[:-1].encode("ascii"), b',"features":[', *features, b"]}"))
 
 
 def geojson_dict(result: MatchResult) -> dict[str, Any]:

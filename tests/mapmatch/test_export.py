@@ -102,6 +102,18 @@ def test_a_result_without_segments_writes_its_points_alone(
     assert len(export.edge_table(empty)) == 0
 
 
+def test_the_head_is_what_json_dumps_writes(results: list[mapmatch.MatchResult]) -> None:
+    result = dataclasses.replace(results[0], trace_id='bus "7" \\ Straße\n\u2603')
+    text = export.geojson_bytes(result)
+    assert json.dumps(result.to_geojson(), allow_nan=False, separators=(",", ":")).encode() == text
+    assert b'"trace_id":"bus \\"7\\" \\\\ Stra\\u00dfe\\n\\u2603"' in text
+    unknown = dataclasses.replace(results[0], matched_length_m=float("nan"))
+    with pytest.raises(ValueError, match="not JSON compliant"):
+        export.geojson_bytes(unknown)
+    with pytest.raises(ValueError, match="not JSON compliant"):
+        json.dumps(unknown.to_geojson(), allow_nan=False)
+
+
 def test_a_pickled_result_writes_the_same_document(results: list[mapmatch.MatchResult]) -> None:
     for result in results[:3]:
         fresh = pickle.loads(pickle.dumps(result))
