@@ -305,11 +305,9 @@ def _pair_routes(graph, ws, scratch, uturn_cost_m, table, from_edge, to_edge, bo
         table[:10]
     )
     fits = t_bound > -np.inf  # no table (bound -inf) never fits, even with no pairs
-    total = 0.0
     for k in range(len(bounds)):
         fits = fits and bounds[k] <= t_bound
-        total += bounds[k]
-    fits = fits and total >= TABLE_FROM_MEAN_BOUND_M * len(bounds)
+    fits = fits and (len(bounds) == 0 or table_pays(bounds))
     if fits:
         rec = within_search_bounds(
             table_records(
