@@ -1177,16 +1177,8 @@ def chained_ascii(tables: Sequence[Table], schema: str | None = None) -> bytes:
     """
     The rows' objects of several tables one after another, joined by commas, ASCII.
 
-    ``b",".join(t.ascii() for t in tables if t.rows)``, written by one compiled call
-    (:func:`chained_pieces` joined).
-
-    Parameters
-    ----------
-    tables
-        The tables, in order.
-    schema
-        A name for chains made by the same code every time (see :class:`Table`): the walk
-        over the columns of the first chain of a schema is kept for the later ones.
+    ``b",".join(t.ascii() for t in tables if t.rows)``, written by one compiled call:
+    :func:`chained_pieces` (same parameters) joined.
 
     Examples
     --------

@@ -395,8 +395,9 @@ def transitions_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - co
     ``step_m, dt, travel_m, slack_m`` are per step between the used observations,
     ``sigma, fix_x, fix_y, heading, speed`` per used observation (``travel_m`` and
     ``heading`` empty when unknown). Returns the scores, the kinds, the forward routes
-    (:func:`_pair_routes`) and ``(move score, move kind, move arrival, arrival)``: each pair's
-    best explanation that moves the car, and the edge the car arrives on ``b``'s edge from
+    (:func:`_pair_routes`: whether the table answered, the searches and each pair's record)
+    and ``(move score, move kind, move arrival, arrival)``: each pair's best explanation
+    that moves the car, and the edge the car arrives on ``b``'s edge from
     with that move and with the best explanation (:data:`~mapmatch.hmm.routes.ARRIVAL_SAME`,
     :data:`~mapmatch.hmm.routes.ARRIVAL_HELD`, or an edge), for the Viterbi pass's check of
     holds across edges (:func:`~mapmatch.hmm.viterbi.viterbi_arrivals_kernel`).
@@ -506,7 +507,7 @@ def transitions_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - co
             kind[k] = ROUTE_STANDSTILL
             arrival[k] = ARRIVAL_SAME if ea[k] == eb[k] else ARRIVAL_HELD
     moves = (moved, move_kind, move_arrival, arrival)
-    return lt, kind, fits, searched, rec, r_dist, r_time, r_turns, moves
+    return lt, kind, fits, searched, rec, moves
 
 
 #: The table argument of :func:`transitions_kernel` when the network has no usable table.

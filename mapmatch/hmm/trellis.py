@@ -250,7 +250,7 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     else:
         travel_m, slack = np.empty(0), np.empty(0)
     heading = oheading[used] if has_heading else oheading
-    lt, kind, fits, searched, rec, _, _, _, moves = transitions_kernel(
+    lt, kind, fits, searched, rec, moves = transitions_kernel(
         graph, ws, scratch, uturn_cost_m, table, edge_speed,
         edge, off, dist, cx, cy, bear, ptr, step, a, b, bounds,
         step_m, dt, osigma[used], ox[used], oy[used], travel_m, slack, heading, ospeed[used],
