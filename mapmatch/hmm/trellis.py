@@ -48,8 +48,6 @@ __all__ = [
     "isolated",
     "model_fixes",
     "observation_arrays",
-    "observation_courses",
-    "observation_paces",
     "repair_breaks",
     "solve",
     "solve_kernel",
@@ -123,7 +121,14 @@ COURSE_MIN_M = 10.0
 
 @njit(cache=True, nogil=True)
 def _courses(used, ox, oy, otime, osigma, params):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    """Bearing of the chord between each used observation's neighbours, per observation."""
+    """
+    The course of each observation: the bearing of the chord between its used neighbours.
+
+    NaN where it has none: an end, neighbours more than ``COURSE_MAX_GAP_S`` apart or closer
+    than ``COURSE_MIN_M`` and 4 sigma, an observation not in ``used``, or
+    ``course_prune_deg`` 0. The trellis drops the candidates that run more than
+    ``course_prune_deg`` from it where the observation has no reported heading.
+    """
     course = np.full(len(ox), np.nan)
     if params[P_COURSE_PRUNE] <= 0:
         return course
@@ -137,31 +142,6 @@ def _courses(used, ox, oy, otime, osigma, params):  # type: ignore[no-untyped-de
     return course
 
 
-def observation_courses(obs: Observations, used: IntArray, config: MatchConfig) -> FloatArray:
-    """
-    The course of each observation: the bearing of the chord between its used neighbours.
-
-    NaN where it has none: an end, neighbours more than ``COURSE_MAX_GAP_S`` apart or closer
-    than ``COURSE_MIN_M`` and 4 sigma, an observation not in ``used``, or
-    ``course_prune_deg`` 0. The trellis drops the candidates that run more than
-    ``course_prune_deg`` from it where the observation has no reported heading.
-    """
-    sigma = np.ascontiguousarray(obs.sigma_m, np.float64)
-    courses = _courses(*_track(obs, used), sigma, model_params(config))  # type: ignore[call-arg]
-    return np.asarray(courses, np.float64)
-
-
-def _track(obs: Observations, used: IntArray) -> tuple[Any, ...]:
-    """``(used, x, y, time)`` as the per-observation kernels read them."""
-    f8 = np.float64
-    return (
-        np.ascontiguousarray(used, np.int64),
-        np.ascontiguousarray(obs.x, f8),
-        np.ascontiguousarray(obs.y, f8),
-        np.ascontiguousarray(obs.time_s, f8),
-    )
-
-
 @njit(cache=True, nogil=True)
 def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     routing, edge_speed, edge_class, cands, used, cut_after, obs, course, pace, travel, params
@@ -173,16 +153,21 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     transitions, the padded trellis, Viterbi and forward-backward. ``routing`` is
     :func:`~mapmatch.hmm.transition.route_inputs`, ``cands`` the seven arrays of every
     observation's :class:`Candidates`, ``obs`` the observations' ``(x, y, time, sigma,
-    speed, heading)`` (heading empty when unknown), ``course`` their
-    :func:`observation_courses`, ``travel`` their
-    :func:`~mapmatch.hmm.observations.travel_arrays`. Last in what it returns: each pair's
-    route record with the records' states and predecessors (:attr:`Solution.route_records`),
-    and whether the precomputed route table pays for the steps' route search bounds
-    (:func:`~mapmatch.hmm.routes.search_bound`, :func:`~mapmatch.hmm.transition.table_pays`).
+    speed, heading)`` (heading empty when unknown), ``course`` and ``pace`` their
+    :func:`_courses` and :func:`~mapmatch.hmm.emission.chord_pace` (each worked out over
+    ``used`` when empty), ``travel`` their :func:`~mapmatch.hmm.observations.travel_arrays`. Last in
+    what it returns: each pair's route record with the records' states and predecessors
+    (:attr:`Solution.route_records`), whether the precomputed route table pays for the steps'
+    route search bounds (:func:`~mapmatch.hmm.routes.search_bound`,
+    :func:`~mapmatch.hmm.transition.table_pays`), and the course and pace used.
     """
     graph, ws, scratch, uturn_cost_m, table = routing
     c_ptr, c_edge, c_off, c_dist, c_x, c_y, c_bear = cands
     ox, oy, otime, osigma, ospeed, oheading = obs
+    if len(course) != len(ox):  # not given: over the used observations
+        course = _courses(used, ox, oy, otime, osigma, params)
+    if len(pace) != len(ox):
+        pace = chord_pace(used, ox, oy, otime)
     n = len(used)
     has_heading = len(oheading) > 0
     # the used observations' candidates and emissions, those within the margin of the best
@@ -309,6 +294,7 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
         states, piece_lo, piece_hi, post, kinds, em_pad, tr_pad,
         (rec, r_state, r_pred),
         table_pays(step_bounds),
+        course, pace,
     )  # fmt: skip
 
 
@@ -325,23 +311,27 @@ def solve(
     """
     Score the trellis over the ``used`` fixes and find the best sequence.
 
-    ``course`` and ``pace`` are each observation's course (:func:`observation_courses`) and
-    pace (:func:`observation_paces`), which choose its candidates; worked out from ``used``
-    when not given, and kept in the solution: a trellis over some of a solution's
+    ``course`` and ``pace`` are each observation's course (:func:`_courses`) and pace
+    (:func:`~mapmatch.hmm.emission.chord_pace`), which choose its candidates; worked out from
+    ``used`` when not given, and kept in the solution: a trellis over some of a solution's
     observations (the detour search's bridges, :func:`bridge_transitions`) is given the
     solution's, so that its observations keep the same candidates.
     """
-    if course is None:
-        course = observation_courses(fixes, used, config)
-    if pace is None:
-        pace = observation_paces(fixes, used)
     inputs = trace_inputs(fixes, all_cands, config)
-    out = _solve_arrays(net, inputs, used, cut_after, course, pace)
+    out = _solve_arrays(
+        net, inputs, used, cut_after, _NOT_GIVEN if course is None else course,
+        _NOT_GIVEN if pace is None else pace,
+    )  # fmt: skip
     cand_arrays, states, piece_lo, piece_hi, post, kinds, em_pad, tr_pad, records = out[:9]
+    course, pace = out[10], out[11]
     cands = Candidates(*cand_arrays)
     return Solution(
         used, cands, states, piece_lo, piece_hi, post, kinds, records, em_pad, tr_pad, course, pace
     )
+
+
+#: ``course`` or ``pace`` of :func:`solve_kernel` when it works them out itself.
+_NOT_GIVEN = np.empty(0)
 
 
 def trace_inputs(
@@ -376,7 +366,7 @@ def _solve_arrays(
     :func:`solve_kernel` over the ``used`` fixes of a trace (:func:`trace_inputs`).
 
     ``course`` and ``pace``: each observation's course and pace the candidates are chosen by
-    (:func:`observation_courses`, :func:`observation_paces`).
+    (:func:`_courses`, :func:`~mapmatch.hmm.emission.chord_pace`; empty: worked out inside).
 
     A sparse trace (its steps' route search bounds) asks the network for its route table,
     which the next traces may use.
@@ -420,17 +410,6 @@ def bridge_transitions(
         net, inputs, pair, cut_after, solution.course_deg, solution.pace_mps
     )[7]
     return tr_pad
-
-
-def observation_paces(obs: Observations, used: IntArray) -> FloatArray:
-    """
-    The pace of each observation: :func:`~mapmatch.hmm.emission.chord_pace` over ``used``.
-
-    NaN for observations not in ``used``. A candidate on a service road costs
-    ``service_penalty`` where both the pace and the observation's speed are fast
-    (:func:`~mapmatch.hmm.emission.road_class_score`).
-    """
-    return np.asarray(chord_pace(*_track(obs, used)), np.float64)
 
 
 def observation_arrays(obs: Observations) -> tuple[FloatArray, ...]:
