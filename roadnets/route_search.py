@@ -27,9 +27,9 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
+from roadnets.record_index import find_record
+
 __all__ = [
-    "find_record",
-    "find_records",
     "gather",
     "group_pairs",
     "new_group_scratch",
@@ -346,40 +346,15 @@ def search_many(  # type: ignore[no-untyped-def]  # pragma: no cover
 
 
 @njit(cache=True, nogil=True)
-def find_record(ptr, state, order, rank, wanted):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """Record of state ``wanted`` in block ``rank`` (-1: no such record, or ``rank < 0``)."""
-    if rank < 0:
-        return -1
-    lo, hi = ptr[rank], ptr[rank + 1]
-    end = hi
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if state[order[mid]] < wanted:
-            lo = mid + 1
-        else:
-            hi = mid
-    if lo < end and state[order[lo]] == wanted:
-        return order[lo]
-    return -1
-
-
-@njit(cache=True, nogil=True)
-def find_records(ptr, state, order, rank, wanted):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """Record of state ``wanted[i]`` in block ``rank[i]`` (-1: no such record or rank)."""
-    out = np.full(len(wanted), -1, dtype=np.int64)
-    for i in range(len(wanted)):
-        out[i] = find_record(ptr, state, order, rank[i], wanted[i])
-    return out
-
-
-@njit(cache=True, nogil=True)
-def table_records(sources, ptr, state, order, copy_ptr, copy_state, from_edge, to_edge):  # type: ignore[no-untyped-def]  # pragma: no cover
+def table_records(sources, ptr, state, index, copy_ptr, copy_state, from_edge, to_edge):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
     Record of the best route of each ``(from, to)`` pair in a table (-1: none).
 
     The record of ``to``'s own state, or of a restricted copy of it reached with a lower key
-    (records of one source are in settling order, which is key order).
+    (records of one source are in settling order, which is key order). ``index`` is the
+    table's :func:`~roadnets.record_index.record_index`.
     """
+    index_ptr, slots = index
     n = len(from_edge)
     out = np.full(n, -1, dtype=np.int64)
     last_from, rank = -1, -1  # the matcher's pairs come in runs of one from edge: one look-up a run
@@ -392,9 +367,9 @@ def table_records(sources, ptr, state, order, copy_ptr, copy_state, from_edge, t
                 rank = -1
         if rank < 0:
             continue
-        best = find_record(ptr, state, order, rank, b)
+        best = find_record(ptr, state, index_ptr, slots, rank, b)
         for c in range(copy_ptr[b], copy_ptr[b + 1]):
-            found = find_record(ptr, state, order, rank, copy_state[c])
+            found = find_record(ptr, state, index_ptr, slots, rank, copy_state[c])
             if found >= 0 and (best < 0 or found < best):
                 best = found
         out[i] = best

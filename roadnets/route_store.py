@@ -65,14 +65,15 @@ THREAD_NAME = "route-table"
 ROUTES_FOLDER = "routes"
 
 #: Bumped whenever the stored arrays change meaning; other folders are then rebuilt.
-_FORMAT = 1
+_FORMAT = 2
 
-#: Arrays of a stored table (``order``: records sorted by state within each source).
-_ARRAYS = ("ptr", "state", "distance_m", "time_s", "uturns", "pred", "order")
+#: Arrays of a stored table (``index_ptr``, ``index_slots``: its look-up index,
+#: :func:`~roadnets.record_index.record_index`).
+_ARRAYS = ("ptr", "state", "distance_m", "time_s", "uturns", "pred", "index_ptr", "index_slots")
 
 #: Bytes of one record: state (int32), length and time (float64), U-turns (int16),
-#: predecessor and sort order (int32).
-_RECORD_BYTES = 4 + 8 + 8 + 2 + 4 + 4
+#: predecessor (int32) and its two index slots (uint16).
+_RECORD_BYTES = 4 + 8 + 8 + 2 + 4 + 2 * 2
 
 #: The note when the network holds a table of its caller's (:meth:`precompute_routes`).
 _GIVEN = "given (precompute_routes)"
@@ -106,12 +107,12 @@ def estimate_bytes(
 def build_table(
     arrays: NetworkArrays, turns: TurnGraph, bound_m: float, *, uturn_cost_m: float
 ) -> RouteTable:
-    """Every edge's routes within ``bound_m``, with the lookup order built."""
+    """Every edge's routes within ``bound_m``, with the look-up index built."""
     from roadnets.routes import route_table
 
     sources = np.arange(arrays.n_edges, dtype=np.int64)
     table = route_table(arrays, turns, sources, bound_m, uturn_cost_m=uturn_cost_m)
-    table.records(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))  # its order
+    table.index()
     return table
 
 
@@ -198,13 +199,13 @@ def read_table(
         pred=loaded["pred"],
         turns=turns,
     )
-    table._sorted.append(loaded["order"])  # its lookup order, stored with it
+    table._index.extend((loaded["index_ptr"], loaded["index_slots"]))  # stored with it
     return table
 
 
 def _array(table: RouteTable, name: str) -> np.ndarray[Any, Any]:
-    if name == "order":
-        return table._order()  # stored, so that reading needs no sort
+    if name.startswith("index_"):
+        return dict(zip(("index_ptr", "index_slots"), table.index(), strict=True))[name]
     found: np.ndarray[Any, Any] = getattr(table, name)
     return found
 
@@ -310,5 +311,5 @@ def _attach(
 
 
 def table_bytes(table: RouteTable) -> int:
-    """Bytes of a table's arrays (with its lookup order)."""
+    """Bytes of a table's arrays (with its look-up index)."""
     return sum(_array(table, name).nbytes for name in _ARRAYS)

@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
+from roadnets.record_index import record_index
 from roadnets.route_search import (
     gather,
     new_group_scratch,
@@ -118,7 +119,7 @@ class RouteTable:
     uturns: Int16Array
     pred: Int32Array
     turns: TurnGraph = field(repr=False)
-    _sorted: list[npt.NDArray[np.integer[Any]]] = field(
+    _index: list[npt.NDArray[np.integer[Any]]] = field(
         default_factory=list, init=False, repr=False, compare=False
     )
 
@@ -132,7 +133,7 @@ class RouteTable:
         a = np.ascontiguousarray(from_edges, dtype=np.int64).ravel()
         b = np.ascontiguousarray(to_edges, dtype=np.int64).ravel()
         turns = self.turns
-        args = (self.sources, self.ptr, self.state, self._order())
+        args = (self.sources, self.ptr, self.state, self.index())
         best = table_records(*args, turns.copy_ptr, turns.copy_state, a, b)
         return np.asarray(best, dtype=np.int64)
 
@@ -176,16 +177,19 @@ class RouteTable:
     def nbytes(self) -> int:
         """Memory held by the table's arrays (not the turn graph)."""
         arrays: list[npt.NDArray[Any]] = [self.sources, self.bounds_m, self.ptr, self.state]
-        arrays += [self.distance_m, self.time_s, self.uturns, self.pred, *self._sorted]
+        arrays += [self.distance_m, self.time_s, self.uturns, self.pred, *self._index]
         return sum(a.nbytes for a in arrays)
 
-    def _order(self) -> IndexArray:
-        """Record indices sorted by state within each source's block, built on first use."""
-        if not self._sorted:
-            rank = np.repeat(np.arange(len(self.sources), dtype=np.int64), np.diff(self.ptr))
-            order = np.argsort(rank * self.turns.n_states + self.state, kind="stable")
-            self._sorted.append(order.astype(np.int32 if len(order) < 2**31 else np.int64))
-        return self._sorted[0]
+    def index(self) -> tuple[IndexArray, IndexArray]:
+        """
+        ``(index_ptr, slots)``: where each source's block holds each state, made on first use.
+
+        See :func:`~roadnets.record_index.record_index`; a stored table brings its own.
+        """
+        if not self._index:
+            self._index.extend(record_index(self.ptr, self.state))
+        index_ptr, slots = self._index
+        return index_ptr, slots
 
 
 @dataclass(frozen=True, slots=True)

@@ -88,10 +88,11 @@ class KernelWarmup:
 
 def _dispatchers() -> list[object]:
     """The kernels called from Python (the others are compiled into them)."""
-    from roadnets import names_kernel, route_search, routing, spatial_kernels
+    from roadnets import names_kernel, record_index, route_search, routing, spatial_kernels
 
     return [
         names_kernel.gather_names,
+        record_index._fill,
         routing._bounded_dijkstra_many,
         route_search.search_many,
         route_search.route_pairs_kernel,

@@ -301,7 +301,7 @@ def _pair_routes(graph, ws, scratch, uturn_cost_m, table, from_edge, to_edge, bo
     :func:`~roadnets.route_search.route_pairs_kernel` (empty then) and per pair its record,
     length, time and U-turns.
     """
-    t_bound, t_sources, t_ptr, t_state, t_order, t_dist, t_time, t_turns, copy_ptr, copy_state = (
+    t_bound, t_sources, t_ptr, t_state, t_index, t_dist, t_time, t_turns, copy_ptr, copy_state = (
         table[:10]
     )
     fits = t_bound > -np.inf  # no table (bound -inf) never fits, even with no pairs
@@ -311,7 +311,7 @@ def _pair_routes(graph, ws, scratch, uturn_cost_m, table, from_edge, to_edge, bo
     if fits:
         rec = within_search_bounds(
             table_records(
-                t_sources, t_ptr, t_state, t_order, copy_ptr, copy_state, from_edge, to_edge
+                t_sources, t_ptr, t_state, t_index, copy_ptr, copy_state, from_edge, to_edge
             ),
             from_edge, bounds, uturn_cost_m, t_dist, t_turns, scratch[0],
         )  # fmt: skip
@@ -516,7 +516,7 @@ _NO_TABLE = (
     np.zeros(0, dtype=np.int64),
     np.zeros(1, dtype=np.int64),
     np.zeros(0, dtype=np.int32),
-    np.zeros(0, dtype=np.int32),
+    (np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.uint16)),
     np.zeros(0),
     np.zeros(0),
     np.zeros(0, dtype=np.int16),
@@ -546,7 +546,7 @@ def route_inputs(net: RoadNetwork) -> tuple[Any, ...]:
     graph = search_graph(net.arrays, net.turns)
     if table is not None and not table.weighted and table.uturn_cost_m == DEFAULT_UTURN_COST_M:
         bound = float(table.bounds_m.min(initial=np.inf))
-        t = (bound, table.sources, table.ptr, table.state, table._order(), table.distance_m,
+        t = (bound, table.sources, table.ptr, table.state, table.index(), table.distance_m,
              table.time_s, table.uturns, net.turns.copy_ptr, net.turns.copy_state,
              table.pred)  # fmt: skip
     else:
