@@ -23,7 +23,7 @@ Bayfront from tests/data (via-way restrictions).
    default): its build time and size, then ``mapmatch.match`` on simulated positions-only
    trips per interval with and without it, interleaved, the median wall time of
    ``--repeats`` passes: points/s both ways, their ratio, the trips' mean search bound
-   (the table answers a trace from ``TABLE_FROM_MEAN_BOUND_M`` on) and the trips whose match
+   (a trace asks for the table from ``TABLE_FROM_MEAN_BOUND_M`` on) and the trips whose match
    differs (must be 0: the table answers what the searches would).
 """
 
@@ -242,8 +242,8 @@ def bench_sparse_table(net: roadnets.RoadNetwork, traces: int, repeats: int) -> 
         )
     head = (
         f"- {net.network_id}: table of routes within {ROUTE_TABLE_BOUND_M:g} m built in "
-        f"{build_s:.2f} s, {table_bytes(table) / 1e6:,.0f} MB; the matcher uses it from a "
-        f"mean bound of {TABLE_FROM_MEAN_BOUND_M:g} m"
+        f"{build_s:.2f} s, {table_bytes(table) / 1e6:,.0f} MB; a trace asks for it from a "
+        f"mean bound of {TABLE_FROM_MEAN_BOUND_M:g} m, and any uses it once it is there"
     )
     return [head, *rows]
 

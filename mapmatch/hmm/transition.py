@@ -74,11 +74,11 @@ __all__ = [
     "driving_on_explains",
     "log_transition",
     "route_inputs",
-    "table_pays",
     "transition_score",
     "transitions_kernel",
     "uturn_cost",
     "uturn_penalties",
+    "wants_table",
 ]
 
 _BIG = float(np.finfo(np.float64).max)
@@ -265,22 +265,22 @@ def uturn_penalties(
     return np.asarray(out, dtype=np.float64).reshape(shape)
 
 
-#: Mean search bound (m) of a trace's pairs from which the precomputed route table answers:
-#: below it the few short searches of a dense trace (shared by its steps) beat the table's
-#: lookups, above it the table is faster. Andorra and Monaco, 2000 m table, one thread,
-#: table against searches by the trips' mean bound: 340 m (1 s) x0.73-0.83, 390 m (5 s)
-#: x0.94-1.02, 450 m (10 s) x1.15-1.21, 510 m (15 s) x1.23-1.40, 680 m (30 s) x1.38-1.87.
+#: Mean search bound (m) of a trace's steps from which it asks the network for its route
+#: table (built in the background, within the memory budget): a sparse trace, whose searches
+#: the table answers 1.2-1.9 times faster (15-30 s). Once there, the table answers every pair
+#: whose bound fits: with its hashed look-ups (:mod:`roadnets.record_index`) within a few per
+#: cent of the searches at 1 s (0.94-1.04x), so a dense trace uses it too but never asks for it.
 TABLE_FROM_MEAN_BOUND_M = 400.0
 
 
 @njit(cache=True, nogil=True)
-def table_pays(bounds_m):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+def wants_table(bounds_m):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     """
-    Whether routes searched with these bounds are answered faster from the route table.
+    Whether steps with these route search bounds make a sparse trace, which asks for the table.
 
     Examples
     --------
-    >>> table_pays(np.array([320.0, 340.0])), table_pays(np.array([600.0, 900.0]))
+    >>> wants_table(np.array([320.0, 340.0])), wants_table(np.array([600.0, 900.0]))
     (False, True)
     """
     total = 0.0
@@ -292,10 +292,7 @@ def table_pays(bounds_m):  # type: ignore[no-untyped-def]  # pragma: no cover - 
 @njit(cache=True, nogil=True)
 def _pair_routes(graph, ws, scratch, uturn_cost_m, table, from_edge, to_edge, bounds):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
-    Routes of edge pairs: from the precomputed table when it pays, else searched.
-
-    The table answers when every bound fits in it and they are long enough on average
-    (:data:`TABLE_FROM_MEAN_BOUND_M`).
+    Routes of edge pairs: from the precomputed table when every bound fits in it, else searched.
 
     Returns whether the table answered, the searches' output of
     :func:`~roadnets.route_search.route_pairs_kernel` (empty then) and per pair its record,
@@ -307,7 +304,6 @@ def _pair_routes(graph, ws, scratch, uturn_cost_m, table, from_edge, to_edge, bo
     fits = t_bound > -np.inf  # no table (bound -inf) never fits, even with no pairs
     for k in range(len(bounds)):
         fits = fits and bounds[k] <= t_bound
-    fits = fits and (len(bounds) == 0 or table_pays(bounds))
     if fits:
         rec = within_search_bounds(
             table_records(

@@ -33,7 +33,7 @@ from mapmatch.hmm.params import (
 from mapmatch.hmm.pathwalk import EPS_M
 from mapmatch.hmm.routes import ARRIVAL_HELD, pairs_kernel, search_bound
 from mapmatch.hmm.solution import Solution
-from mapmatch.hmm.transition import route_inputs, table_pays, transitions_kernel
+from mapmatch.hmm.transition import route_inputs, transitions_kernel, wants_table
 from mapmatch.hmm.viterbi import _posterior_kernel, viterbi_arrivals_kernel
 
 if TYPE_CHECKING:
@@ -157,9 +157,9 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     :func:`_courses` and :func:`~mapmatch.hmm.emission.chord_pace` (each worked out over
     ``used`` when empty), ``travel`` their :func:`~mapmatch.hmm.observations.travel_arrays`. Last in
     what it returns: each pair's route record with the records' states and predecessors
-    (:attr:`Solution.route_records`), whether the precomputed route table pays for the steps'
-    route search bounds (:func:`~mapmatch.hmm.routes.search_bound`,
-    :func:`~mapmatch.hmm.transition.table_pays`), and the course and pace used.
+    (:attr:`Solution.route_records`), whether the steps' route search bounds make a sparse
+    trace that asks for the route table (:func:`~mapmatch.hmm.routes.search_bound`,
+    :func:`~mapmatch.hmm.transition.wants_table`), and the course and pace used.
     """
     graph, ws, scratch, uturn_cost_m, table = routing
     c_ptr, c_edge, c_off, c_dist, c_x, c_y, c_bear = cands
@@ -293,7 +293,7 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
         (ptr, edge, off, dist, cx, cy, bear),
         states, piece_lo, piece_hi, post, kinds, em_pad, tr_pad,
         (rec, r_state, r_pred),
-        table_pays(step_bounds),
+        wants_table(step_bounds),
         course, pace,
     )  # fmt: skip
 
