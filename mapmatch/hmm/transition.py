@@ -410,20 +410,24 @@ def transitions_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - co
     step_sigma = np.empty(n)
     tolerance = np.empty(n)
     penalty = np.empty(n)
+    last_step, last_a = -1, -1  # pairs come in runs of one step and one a: each priced once
+    step_penalty = a_penalty = params[P_UTURN_PENALTY]
     for k in range(n):
         t = step[k]
         s = max(sigma[t], sigma[t + 1])
         step_sigma[k] = s
         tolerance[k] = max(params[P_STANDSTILL_M], params[P_STANDSTILL_SIGMAS] * s)
-        if len(heading):
-            w = min(speed_weight(speed[t], params), speed_weight(speed[t + 1], params))
-            penalty[k] = uturn_cost(heading[t], heading[t + 1], w, params)
-            if penalty[k] < params[P_UTURN_PENALTY] and driving_on_explains(
+        if len(heading) and (t != last_step or a[k] != last_a):
+            if t != last_step:
+                w = min(speed_weight(speed[t], params), speed_weight(speed[t + 1], params))
+                step_penalty = uturn_cost(heading[t], heading[t + 1], w, params)
+            a_penalty = step_penalty
+            if step_penalty < params[P_UTURN_PENALTY] and driving_on_explains(
                 ea[k], oa[k], heading[t + 1], c_ptr[t + 1], c_ptr[t + 2], c_edge, c_off, c_bear
             ):
-                penalty[k] = params[P_UTURN_PENALTY]
-        else:
-            penalty[k] = params[P_UTURN_PENALTY]
+                a_penalty = params[P_UTURN_PENALTY]
+            last_step, last_a = t, a[k]
+        penalty[k] = a_penalty
         e1, e2 = ea[k], eb[k]
         route, free, kind[k] = forward_route(
             e1, e2, oa[k], ob[k], edge_len[e1], edge_speed[e1], edge_speed[e2],
