@@ -302,8 +302,9 @@ class Segment:
         if self._lon is None or self._lat is None:
             net = self._net
             assert net is not None  # checked in __init__
-            x, y = net.path_polyline(self.edge, self.start_offset_m, self.end_offset_m)
-            self._lon, self._lat = net.unproject(x, y)
+            self._lon, self._lat = net.path_lonlat(
+                self.edge, self.start_offset_m, self.end_offset_m
+            )
         return self._lon, self._lat
 
     @property

@@ -101,6 +101,7 @@ def _dispatchers() -> list[object]:
         route_search.within_search_bounds,
         spatial_kernels.nearby_kernel,
         spatial_kernels.path_polyline_kernel,
+        spatial_kernels.path_lonlat_kernel,
     ]
 
 
@@ -178,6 +179,7 @@ def warm_kernels() -> KernelWarmup:
     net.unproject(x, y)
     net.nearby_edges(x, y, 50.0)
     net.path_polyline(edges[:2], np.zeros(2), a.edge_length_m[:2])
+    net.path_lonlat(edges[:2], np.zeros(2), a.edge_length_m[:2])
     net.way_names.names_of(a.edge_way_id[:2])
     edge_records(a, net.way_names, edges[:2])
     net.precompute_routes(1000.0)
