@@ -216,13 +216,14 @@ def edge_records(arrays: NetworkArrays, names: WayNames, edge: IntArray) -> Edge
     from roadnets.names_kernel import gather_edges  # numba only once edges are read
 
     a = arrays
-    u, v, key, way, length_m, speed_kph, road_class, joined, start, size = gather_edges(
+    whole, real, joined = gather_edges(
         np.ascontiguousarray(edge, dtype=np.int64), a.node_osm_id, a.edge_u, a.edge_v,
         a.edge_key, a.edge_way_id, a.edge_length_m, a.edge_speed_mps, a.edge_class,
         names._ids, names._ptr, names._blob,
     )  # fmt: skip
+    u, v, key, way, road_class, start, size = whole
     if names._overlay or names._deleted:
         found = names.names_of(way)
     else:
         found = _split(joined, names._blob, start, size)
-    return u, v, key, way, length_m, speed_kph, road_class, found
+    return u, v, key, way, real[0], real[1], road_class, found
