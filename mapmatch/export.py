@@ -329,6 +329,8 @@ def _segment_table(result: MatchResult, paths: SegmentPaths, edges: EdgeTable) -
 
 def _segment_times(edges: EdgeTable, bounds: IntArray) -> tuple[FloatArray, FloatArray]:
     """Each segment's first entry and last exit time (NaN without times or edges)."""
+    if len(bounds) == 2 and bounds[1] > 0:  # one segment with edges: views, no gathers
+        return edges.entry_time_s[:1], edges.exit_time_s[bounds[1] - 1 : bounds[1]]
     first, after = bounds[:-1], bounds[1:]
     if (after > first).all():  # every segment has edges, as a match's do
         return edges.entry_time_s[first], edges.exit_time_s[after - 1]

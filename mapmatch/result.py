@@ -17,6 +17,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from roadnets.names import edge_records
+
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
@@ -110,19 +112,18 @@ class EdgeAttributes:
     @classmethod
     def of_edges(cls, net: RoadNetwork, edge: IntArray) -> EdgeAttributes:
         """Read the attributes of network edges ``edge`` (array of edge indices)."""
-        a = net.arrays
-        u, v, key = net.edge_osm_ids(edge)
-        way = np.asarray(a.edge_way_id[edge], dtype=np.int64)
-        classes = _road_classes()[a.edge_class[edge]]
+        u, v, key, way, length, speed, road_class, name = edge_records(
+            net.arrays, net.way_names, edge
+        )
         return cls(
-            u=np.asarray(u, dtype=np.int64),
-            v=np.asarray(v, dtype=np.int64),
-            key=np.asarray(key, dtype=np.int64),
+            u=u,
+            v=v,
+            key=key,
             way_id=way,
-            length_m=np.asarray(a.edge_length_m[edge], dtype=np.float64),
-            speed_limit_kph=np.asarray(a.edge_speed_mps[edge], dtype=np.float64) * 3.6,
-            road_class=tuple(classes.tolist()),
-            name=tuple(net.way_names.names_of(way)),
+            length_m=length,
+            speed_limit_kph=speed,
+            road_class=tuple(_road_classes()[road_class].tolist()),
+            name=tuple(name),
         )
 
     @classmethod
@@ -301,8 +302,9 @@ class Segment:
         if self._lon is None or self._lat is None:
             net = self._net
             assert net is not None  # checked in __init__
-            x, y = net.path_polyline(self.edge, self.start_offset_m, self.end_offset_m)
-            self._lon, self._lat = net.unproject(x, y)
+            self._lon, self._lat = net.path_lonlat(
+                self.edge, self.start_offset_m, self.end_offset_m
+            )
         return self._lon, self._lat
 
     @property

@@ -4,7 +4,8 @@ A dict of hundreds of thousands of ``int -> str`` entries costs tens of MB of Py
 per process and a JSON parse at every load. The names live in the network's arrays instead
 (memory-mapped from the cache and shared between processes like the rest): the sorted way ids,
 offsets, and the UTF-8 bytes of every name end to end. :class:`WayNames` reads them as a
-mapping and looks many up at once (:meth:`WayNames.names_of`).
+mapping and looks many up at once (:meth:`WayNames.names_of`); :func:`edge_records` reads
+what the network says about some edges, their ways' names included, in one compiled pass.
 """
 
 from __future__ import annotations
@@ -18,9 +19,12 @@ import numpy.typing as npt
 if TYPE_CHECKING:
     from collections.abc import Mapping
 
-__all__ = ["WayNames", "encode_names"]
+    from roadnets.arrays import NetworkArrays
+
+__all__ = ["EdgeRecords", "WayNames", "edge_records", "encode_names"]
 
 IntArray = npt.NDArray[np.int64]
+FloatArray = npt.NDArray[np.float64]
 ByteArray = npt.NDArray[np.uint8]
 
 
@@ -70,8 +74,15 @@ def _decode_joined(ids: IntArray, ptr: IntArray, blob: ByteArray, ways: IntArray
     if not len(ways):
         return []
     joined, start, size = gather_names(ids, ptr, blob, ways)
+    return _split(joined, blob, start, size)
+
+
+def _split(joined: ByteArray, blob: ByteArray, start: IntArray, size: IntArray) -> list[str]:
+    """The names a compiled gather joined with NULs (one by one if a name holds a NUL)."""
+    if not len(start):
+        return []
     names = joined.tobytes().decode("utf-8").split("\0")
-    return names if len(names) == len(ways) else _decode_each(blob, start, size)
+    return names if len(names) == len(start) else _decode_each(blob, start, size)
 
 
 class WayNames(MutableMapping[int, str]):
@@ -168,3 +179,51 @@ class WayNames(MutableMapping[int, str]):
         if self._overlay or self._deleted or not len(self._ids):
             return [self.get(way, "") for way in ways.tolist()]
         return _decode_joined(self._ids, self._ptr, self._blob, ways)
+
+
+#: What :func:`edge_records` returns, one entry per edge each: ``u``, ``v``, ``key`` (OSM
+#: ids), way id, length (m), speed limit (km/h), road class index and name.
+EdgeRecords = tuple[
+    IntArray, IntArray, IntArray, IntArray, FloatArray, FloatArray, IntArray, list[str]
+]
+
+
+def edge_records(arrays: NetworkArrays, names: WayNames, edge: IntArray) -> EdgeRecords:
+    """
+    The OSM ids, way, length, speed limit, class and name of each of the edges ``edge``.
+
+    ``u``, ``v`` and ``key`` are the edge's OSM ids, then its OSM way, its length, its
+    ``maxspeed`` in km/h (or the class default), the index of its class in
+    :data:`roadnets.drivable.ROAD_CLASSES` and its way's name (``""`` for none).
+
+    One compiled pass over the edges (:func:`~roadnets.names_kernel.gather_edges`) instead of
+    a dozen array gathers and the names' own.
+
+    Parameters
+    ----------
+    arrays
+        The network's arrays.
+    names
+        Its way names (an edited :class:`WayNames` is read through its edits).
+    edge
+        Edge indices.
+
+    Raises
+    ------
+    IndexError
+        If an edge is not one of the network's.
+    """
+    from roadnets.names_kernel import gather_edges  # numba only once edges are read
+
+    a = arrays
+    whole, real, joined = gather_edges(
+        np.ascontiguousarray(edge, dtype=np.int64), a.node_osm_id, a.edge_u, a.edge_v,
+        a.edge_key, a.edge_way_id, a.edge_length_m, a.edge_speed_mps, a.edge_class,
+        names._ids, names._ptr, names._blob,
+    )  # fmt: skip
+    u, v, key, way, road_class, start, size = whole
+    if names._overlay or names._deleted:
+        found = names.names_of(way)
+    else:
+        found = _split(joined, names._blob, start, size)
+    return u, v, key, way, real[0], real[1], road_class, found

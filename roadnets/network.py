@@ -461,6 +461,29 @@ class RoadNetwork:
         )
         return np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
 
+    def path_lonlat(
+        self, edge: IntArray, start_m: FloatArray, end_m: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """
+        :meth:`path_polyline`'s vertices in WGS84 lon/lat degrees (:meth:`unproject`).
+
+        One compiled call for a network in a :meth:`~roadnets.projection.Projector.local` CRS
+        (:func:`~roadnets.spatial_kernels.path_lonlat_kernel`), the same numbers.
+        """
+        compiled = self.projector.compiled
+        if compiled is None:
+            return self.unproject(*self.path_polyline(edge, start_m, end_m))
+        from roadnets.spatial_kernels import path_lonlat_kernel
+
+        lon, lat = path_lonlat_kernel(
+            np.ascontiguousarray(edge, dtype=np.int64),
+            np.ascontiguousarray(start_m, dtype=np.float64),
+            np.ascontiguousarray(end_m, dtype=np.float64),
+            self.kernel_geometry,
+            compiled.inverse_parameters,
+        )
+        return lon, lat
+
     def edge_osm_ids(self, edge: IntArray) -> tuple[IntArray, IntArray, IntArray]:
         """OSM ``(u, v, key)`` of each edge (u and v are OSM node ids)."""
         a = self.arrays

@@ -224,6 +224,11 @@ class Projector:
         found = _TMERC.match(self.crs)
         return f"tmerc({found['lon']}, {found['lat']})" if found else self.crs
 
+    @property
+    def compiled(self) -> TransverseMercator | None:
+        """The compiled projection of a :meth:`local` CRS (:mod:`roadnets.tmerc`), else ``None``."""
+        return _local(self.crs)
+
     def forward(self, lon: FloatArray, lat: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Project lon/lat degrees to x/y metres."""
         local = _local(self.crs)

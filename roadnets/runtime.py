@@ -92,6 +92,7 @@ def _dispatchers() -> list[object]:
 
     return [
         names_kernel.gather_names,
+        names_kernel.gather_edges,
         record_index._fill,
         routing._bounded_dijkstra_many,
         route_search.search_many,
@@ -101,6 +102,7 @@ def _dispatchers() -> list[object]:
         route_search.within_search_bounds,
         spatial_kernels.nearby_kernel,
         spatial_kernels.path_polyline_kernel,
+        spatial_kernels.path_lonlat_kernel,
     ]
 
 
@@ -146,8 +148,8 @@ def warm_kernels() -> KernelWarmup:
     Compile (or load from numba's cache) every roadnets kernel, before it is needed.
 
     Runs the node router, the edge router (pairs and tables, lengths and caller costs), the
-    table look-ups, the projection both ways, the R-tree query and the street names' gather
-    once each on a 3 x 3 block network built in memory.
+    table look-ups, the projection both ways, the R-tree query, the street names' gather and the
+    edges' attributes gather once each on a 3 x 3 block network built in memory.
     Cheap when the kernels are already in numba's on-disk cache; seconds on a fresh install.
 
     Returns
@@ -155,6 +157,8 @@ def warm_kernels() -> KernelWarmup:
     KernelWarmup
         Time spent and how many kernel signatures were compiled or loaded.
     """
+    from roadnets.names import edge_records
+
     started = time.perf_counter()
     misses, hits = _counts()
     net = _tiny_network()
@@ -176,7 +180,9 @@ def warm_kernels() -> KernelWarmup:
     net.unproject(x, y)
     net.nearby_edges(x, y, 50.0)
     net.path_polyline(edges[:2], np.zeros(2), a.edge_length_m[:2])
+    net.path_lonlat(edges[:2], np.zeros(2), a.edge_length_m[:2])
     net.way_names.names_of(a.edge_way_id[:2])
+    edge_records(a, net.way_names, edges[:2])
     net.precompute_routes(1000.0)
     net.edge_routes(edges, edges[::-1], 500.0)  # answered from the table
     misses_now, hits_now = _counts()

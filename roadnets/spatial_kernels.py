@@ -8,6 +8,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from roadnets.tmerc import inverse_kernel
+
 __all__ = ["nearby_kernel", "path_polyline_kernel", "point_on_edge", "points_on_edges"]
 
 
@@ -341,3 +343,14 @@ def path_polyline_kernel(edge, start_m, end_m, geom):  # type: ignore[no-untyped
                 n = _append(xs, ys, n, geom_x[v], geom_y[v])
         n = _append(xs, ys, n, ex, ey)
     return xs[:n], ys[:n]
+
+
+@njit(cache=True, nogil=True)
+def path_lonlat_kernel(edge, start_m, end_m, geom, inverse):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """
+    :func:`path_polyline_kernel`'s vertices unprojected to WGS84 lon/lat degrees, in one call.
+
+    ``inverse`` is the network's :attr:`~roadnets.tmerc.TransverseMercator.inverse_parameters`.
+    """
+    x, y = path_polyline_kernel(edge, start_m, end_m, geom)
+    return inverse_kernel(x, y, *inverse)

@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-__all__ = ["TransverseMercator"]
+__all__ = ["TransverseMercator", "inverse_kernel"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -145,7 +145,7 @@ def _forward(lon, lat, lon_0, northing_0, scale, to_gauss, from_sphere):  # type
 
 
 @njit(cache=True, nogil=True)
-def _inverse(x, y, lon_0, northing_0, scale, from_gauss, to_sphere):  # type: ignore[no-untyped-def]  # pragma: no cover
+def inverse_kernel(x, y, lon_0, northing_0, scale, from_gauss, to_sphere):  # type: ignore[no-untyped-def]  # pragma: no cover
     """Metres east/north of the origin to degrees (see :class:`TransverseMercator`)."""
     n = len(x)
     lon, lat = np.empty(n), np.empty(n)
@@ -229,13 +229,14 @@ class TransverseMercator:
 
     def inverse(self, x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Unproject x/y metres to lon/lat degrees."""
-        lon, lat = _inverse(
+        lon, lat = inverse_kernel(
             np.ascontiguousarray(x, np.float64),
             np.ascontiguousarray(y, np.float64),
-            self.lon_0,
-            self.northing_0,
-            self.scale,
-            self.from_gauss,
-            self.to_sphere,
+            *self.inverse_parameters,
         )
         return lon, lat
+
+    @property
+    def inverse_parameters(self) -> tuple[float, float, float, FloatArray, FloatArray]:
+        """What the compiled inverse (:func:`inverse_kernel`) takes after ``x`` and ``y``."""
+        return self.lon_0, self.northing_0, self.scale, self.from_gauss, self.to_sphere

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import roadnets
-from roadnets.names import encode_names
+from roadnets.names import edge_records, encode_names
 from roadnets.route_store import THREAD_NAME
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -233,3 +233,29 @@ def test_network_build_on_a_cached_network_says_so(
     with pytest.raises(SystemExit):
         main([*args, "--route-table-mb", "-1"])
     assert "--route-table-mb: must be a number of MB >= 0 (got '-1')" in capsys.readouterr().err
+
+
+def test_edge_records_are_the_arrays_gathered_one_by_one(oakland_net: roadnets.RoadNetwork) -> None:
+    # one compiled pass gives what a dozen numpy gathers and the names' own gather give
+    a = oakland_net.arrays
+    names = oakland_net.way_names
+    edge = np.array([5, 0, a.n_edges - 1, 5, 17])
+    u, v, key, way, length, speed, road_class, name = edge_records(a, names, edge)
+    assert u.tolist() == a.node_osm_id[a.edge_u[edge]].tolist()
+    assert v.tolist() == a.node_osm_id[a.edge_v[edge]].tolist()
+    assert key.tolist() == a.edge_key[edge].tolist()
+    assert way.tolist() == a.edge_way_id[edge].tolist()
+    assert length.tobytes() == a.edge_length_m[edge].astype(np.float64).tobytes()
+    kph = np.asarray(a.edge_speed_mps[edge], dtype=np.float64) * 3.6
+    assert speed.tobytes() == kph.tobytes()
+    assert road_class.tolist() == a.edge_class[edge].tolist()
+    assert name == names.names_of(a.edge_way_id[edge])
+    assert edge_records(a, names, np.zeros(0, dtype=np.int64))[-1] == []
+    way = int(a.edge_way_id[5])
+    names[way] = "<b>x</b>"  # an edited mapping is read through its edits
+    try:
+        assert edge_records(a, names, edge)[-1][0] == "<b>x</b>"
+    finally:
+        del names[way]
+    with pytest.raises(IndexError):
+        edge_records(a, names, np.array([a.n_edges]))

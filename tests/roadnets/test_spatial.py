@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import dataclasses
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -7,6 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from roadnets.projection import Projector
 from roadnets.spatial import PACKED_FANOUT, query_edges, query_packed, rtree_rank
 
 if TYPE_CHECKING:
@@ -138,6 +140,24 @@ def test_path_polyline_joins_edge_stretches(default_net: roadnets.RoadNetwork) -
     assert np.allclose(y, np.concatenate(ey))
     length = float(np.hypot(np.diff(x), np.diff(y)).sum())
     assert length == pytest.approx(a.edge_length_m[e1] - start + end)
+
+
+def test_path_lonlat_is_the_unprojected_polyline(default_net: roadnets.RoadNetwork) -> None:
+    # one compiled call gives the numbers of path_polyline then unproject, bit for bit; a
+    # network in a CRS the compiled projection does not cover still gets them through pyproj
+    a = default_net.arrays
+    rng = np.random.default_rng(5)
+    edge = rng.integers(0, a.n_edges, 12)
+    start = rng.random(12) * a.edge_length_m[edge]
+    end = start + rng.random(12) * (a.edge_length_m[edge] - start)
+    elsewhere = dataclasses.replace(default_net, projector=Projector("EPSG:32632"))
+    for net in (default_net, elsewhere):
+        want = net.unproject(*net.path_polyline(edge, start, end))
+        got = net.path_lonlat(edge, start, end)
+        assert got[0].tobytes() == want[0].tobytes()
+        assert got[1].tobytes() == want[1].tobytes()
+    assert default_net.projector.compiled is not None
+    assert elsewhere.projector.compiled is None
 
 
 def test_issue_5_concurrent_queries_from_many_threads_agree(
