@@ -67,9 +67,11 @@ ROUTES_FOLDER = "routes"
 #: Bumped whenever the stored arrays change meaning; other folders are then rebuilt.
 _FORMAT = 2
 
-#: Arrays of a stored table (``index_ptr``, ``index_slots``: its look-up index,
-#: :func:`~roadnets.record_index.record_index`).
-_ARRAYS = ("ptr", "state", "distance_m", "time_s", "uturns", "pred", "index_ptr", "index_slots")
+#: The arrays of a stored table's look-up index, :func:`~roadnets.record_index.record_index`.
+_INDEX_ARRAYS = ("index_ptr", "index_slots")
+
+#: Arrays of a stored table: its records, then its look-up index.
+_ARRAYS = ("ptr", "state", "distance_m", "time_s", "uturns", "pred", *_INDEX_ARRAYS)
 
 #: Bytes of one record: state (int32), length and time (float64), U-turns (int16),
 #: predecessor (int32) and its two index slots (uint16).
@@ -199,13 +201,13 @@ def read_table(
         pred=loaded["pred"],
         turns=turns,
     )
-    table._index.extend((loaded["index_ptr"], loaded["index_slots"]))  # stored with it
+    table._index.extend(loaded[name] for name in _INDEX_ARRAYS)  # stored with it
     return table
 
 
 def _array(table: RouteTable, name: str) -> np.ndarray[Any, Any]:
-    if name.startswith("index_"):
-        return dict(zip(("index_ptr", "index_slots"), table.index(), strict=True))[name]
+    if name in _INDEX_ARRAYS:
+        return table.index()[_INDEX_ARRAYS.index(name)]
     found: np.ndarray[Any, Any] = getattr(table, name)
     return found
 
