@@ -24,17 +24,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from mapmatch.hmm.geometry import (
-    network_geometry,
-    point_on_edge,
-    project_kernel,
-    stretch_vertices,
-)
-from mapmatch.hmm.loops import chosen_scatter_kernel, loop_network
+from mapmatch.hmm.geometry import point_on_edge, project_kernel, stretch_vertices
+from mapmatch.hmm.loops import chosen_scatter_kernel
+from mapmatch.hmm.network_inputs import network_inputs
 from mapmatch.hmm.observations import travel_arrays
 from mapmatch.hmm.params import model_params
 from mapmatch.hmm.pathwalk import walk_pieces
-from mapmatch.hmm.transition import route_inputs
 from mapmatch.result import MatchedPoints, Segment
 
 if TYPE_CHECKING:
@@ -74,26 +69,30 @@ def _locate(edge, start_m, end_m, along):  # type: ignore[no-untyped-def]  # pra
 
 @njit(cache=True, nogil=True)
 def _assemble_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    walk, place, loops
+    network, walk, place, loops
 ):
     """
     :func:`walk_pieces`, then :func:`_place` on its paths: one call (argument tuples of each).
 
+    ``network`` is the network's :func:`~mapmatch.hmm.network_inputs.network_inputs`: the
+    network arrays of each tuple are taken from it.
+
     ``place[3]`` is the padded posterior of the solution; :func:`_place` is given the chosen
-    candidate's. ``place[7]`` the candidates' distances, of which the chosen ones give the
+    candidate's. ``place[5]`` the candidates' distances, of which the chosen ones give the
     scatter the fixes show (:func:`~mapmatch.hmm.loops.chosen_scatter_kernel`), which
     ``loops`` and ``_place`` are given last.
     """
-    solution, obs, fixes, travel, net, routing, hold_limit = walk
+    solution, obs, fixes, travel, hold_limit = walk
     chosen_m, scatter = chosen_scatter_kernel(
-        solution[0], place[7], solution[3], solution[7], obs[0], obs[1]
+        solution[0], place[5], solution[3], solution[7], obs[0], obs[1]
     )
-    log_em, ox, oy, sigma, params, loop_penalty, loop_net = loops
+    log_em, ox, oy, sigma, params, loop_penalty = loops
     row_ptr, w_edge, w_lo, w_hi, along, jumps, removed = walk_pieces(
-        solution, obs, fixes, travel, net, routing, hold_limit,
-        (log_em, ox, oy, sigma, params, loop_penalty, loop_net, scatter, chosen_m),
+        solution, obs, fixes, travel, network.walk_net, network.routing, hold_limit,
+        (log_em, ox, oy, sigma, params, loop_penalty, network.loop_net, scatter, chosen_m),
     )  # fmt: skip
-    pieces, obs_place, fix_place, post_pad, thinning, geom, ids, _ = place
+    pieces, obs_place, fix_place, post_pad, thinning, _ = place
+    geom, ids = network.geom, network.ids
     states = solution[3]
     post = np.empty(len(states))
     for i in range(len(states)):
@@ -354,9 +353,7 @@ def assemble(
     ``time_s`` is every fix's time (NaN throughout without usable times): whether a car turning
     round had time to reach a dead end's end is read from the gaps between fixes.
     """
-    a = net.arrays
     c, used, states = solution.cands, solution.used, solution.states
-    geom = network_geometry(net)
     f8 = np.float64
     x = np.ascontiguousarray(x, f8)
     y = np.ascontiguousarray(y, f8)
@@ -365,16 +362,24 @@ def assemble(
     record, record_state, record_pred = solution.route_records
     sigma = np.ascontiguousarray(obs.sigma_m, f8)
     walk = (
-        (c.ptr, c.edge, c.offset_m, states, solution.kinds, p_lo, p_hi, used,
-         record, record_state, record_pred),
+        (
+            c.ptr,
+            c.edge,
+            c.offset_m,
+            states,
+            solution.kinds,
+            p_lo,
+            p_hi,
+            used,
+            record,
+            record_state,
+            record_pred,
+        ),
         (obs.first, obs.stop, np.ascontiguousarray(obs.time_s, f8)),
         (x, y, radius, np.ascontiguousarray(time_s, f8)),
         travel_arrays(obs.travel),
-        (a.edge_length_m, a.edge_speed_mps, a.edge_u, a.edge_v, a.edge_twin, a.out_ptr,
-         net.turns.state_edge, geom),
-        route_inputs(net),
         float(hold_limit_m),
-    )  # fmt: skip
+    )
     loops = (
         np.ascontiguousarray(solution.log_emission, f8),
         np.ascontiguousarray(obs.x, f8),
@@ -382,7 +387,6 @@ def assemble(
         sigma,
         model_params(config),
         float(config.loop_penalty),
-        loop_network(net),
     )
     place = (
         (p_lo, p_hi, used),
@@ -390,11 +394,9 @@ def assemble(
         (x, y, radius, np.ascontiguousarray(outlier, np.bool_)),
         np.ascontiguousarray(solution.post, f8),
         (float(config.thinning_sigmas), float(config.standstill_m)),
-        geom,
-        (a.node_osm_id, a.edge_u, a.edge_v, a.edge_key),
         c.distance_m,
     )
-    placed, jumps, removed = _assemble_kernel(walk, place, loops)
+    placed, jumps, removed = _assemble_kernel(network_inputs(net), walk, place, loops)
     (t_ptr, t_edge, t_lo, t_hi), first_fix, last_fix, per_fix, flagged = placed
     matched, interpolated, edge, offset, confidence, segment_of, px, py, distance, u, v, key = (
         per_fix

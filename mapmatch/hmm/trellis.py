@@ -22,6 +22,7 @@ from mapmatch.hmm.emission import (
     road_class_score,
     speed_weight,
 )
+from mapmatch.hmm.network_inputs import network_inputs
 from mapmatch.hmm.observations import between_kernel, travel_arrays
 from mapmatch.hmm.params import (
     P_CANDIDATE_MARGIN,
@@ -33,7 +34,7 @@ from mapmatch.hmm.params import (
 from mapmatch.hmm.pathwalk import EPS_M
 from mapmatch.hmm.routes import ARRIVAL_HELD, pairs_kernel, search_bound
 from mapmatch.hmm.solution import Solution
-from mapmatch.hmm.transition import route_inputs, transitions_kernel, wants_table
+from mapmatch.hmm.transition import transitions_kernel, wants_table
 from mapmatch.hmm.viterbi import _posterior_kernel, viterbi_arrivals_kernel
 
 if TYPE_CHECKING:
@@ -144,16 +145,16 @@ def _courses(used, ox, oy, otime, osigma, params):  # type: ignore[no-untyped-de
 
 @njit(cache=True, nogil=True)
 def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    routing, edge_speed, edge_class, cands, used, cut_after, obs, course, pace, travel, params
+    network, cands, used, cut_after, obs, course, pace, travel, params
 ):
     """
     :func:`solve` in one call, routes searched inside.
 
     The used observations' candidates and emissions, the margin, the pairs and their
-    transitions, the padded trellis, Viterbi and forward-backward. ``routing`` is
-    :func:`~mapmatch.hmm.transition.route_inputs`, ``cands`` the seven arrays of every
-    observation's :class:`Candidates`, ``obs`` the observations' ``(x, y, time, sigma,
-    speed, heading)`` (heading empty when unknown), ``course`` and ``pace`` their
+    transitions, the padded trellis, Viterbi and forward-backward. ``network`` is the
+    network's :func:`~mapmatch.hmm.network_inputs.network_inputs`, ``cands`` the seven
+    arrays of every observation's :class:`Candidates`, ``obs`` the observations' ``(x, y,
+    time, sigma, speed, heading)`` (heading empty when unknown), ``course`` and ``pace`` their
     :func:`_courses` and :func:`~mapmatch.hmm.emission.chord_pace` (each worked out over
     ``used`` when empty), ``travel`` their :func:`~mapmatch.hmm.observations.travel_arrays`. Last in
     what it returns: each pair's route record with the records' states and predecessors
@@ -161,7 +162,8 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     trace that asks for the route table (:func:`~mapmatch.hmm.routes.search_bound`,
     :func:`~mapmatch.hmm.transition.wants_table`), and the course and pace used.
     """
-    graph, ws, scratch, uturn_cost_m, table = routing
+    graph, ws, scratch, uturn_cost_m, table = network.routing
+    edge_speed, edge_class = network.edge_speed, network.edge_class
     c_ptr, c_edge, c_off, c_dist, c_x, c_y, c_bear = cands
     ox, oy, otime, osigma, ospeed, oheading = obs
     if len(course) != len(ox):  # not given: over the used observations
@@ -373,9 +375,7 @@ def _solve_arrays(
     """
     cand_arrays, obs, travel, params = inputs
     out: tuple[Any, ...] = solve_kernel(
-        route_inputs(net),  # read each time: the table may have come meanwhile
-        net.arrays.edge_speed_mps,
-        net.arrays.edge_class,
+        network_inputs(net),  # read each time: the table may have come meanwhile
         cand_arrays,
         np.ascontiguousarray(used, dtype=np.int64),
         np.ascontiguousarray(cut_after, dtype=np.bool_),
