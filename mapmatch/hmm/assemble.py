@@ -362,24 +362,13 @@ def assemble(
     record, record_state, record_pred = solution.route_records
     sigma = np.ascontiguousarray(obs.sigma_m, f8)
     walk = (
-        (
-            c.ptr,
-            c.edge,
-            c.offset_m,
-            states,
-            solution.kinds,
-            p_lo,
-            p_hi,
-            used,
-            record,
-            record_state,
-            record_pred,
-        ),
+        (c.ptr, c.edge, c.offset_m, states, solution.kinds, p_lo, p_hi, used,
+         record, record_state, record_pred),
         (obs.first, obs.stop, np.ascontiguousarray(obs.time_s, f8)),
         (x, y, radius, np.ascontiguousarray(time_s, f8)),
         travel_arrays(obs.travel),
         float(hold_limit_m),
-    )
+    )  # fmt: skip
     loops = (
         np.ascontiguousarray(solution.log_emission, f8),
         np.ascontiguousarray(obs.x, f8),

@@ -73,15 +73,16 @@ def network_inputs(net: RoadNetwork) -> NetworkInputs:
         held: NetworkInputs = last[1]
         return held
     a, geom = net.arrays, network_geometry(net)
-    made: NetworkInputs = _made(
-        routing,
-        a.edge_speed_mps,
-        a.edge_class,
-        (a.edge_length_m, a.edge_speed_mps, a.edge_u, a.edge_v, a.edge_twin, a.out_ptr,
-         net.turns.state_edge, geom),
-        loop_network(net),
-        geom,
-        (a.node_osm_id, a.edge_u, a.edge_v, a.edge_key),
-    )  # fmt: skip
+    fields = {
+        "routing": routing,
+        "edge_speed": a.edge_speed_mps,
+        "edge_class": a.edge_class,
+        "walk_net": (a.edge_length_m, a.edge_speed_mps, a.edge_u, a.edge_v, a.edge_twin,
+                     a.out_ptr, net.turns.state_edge, geom),
+        "loop_net": loop_network(net),
+        "geom": geom,
+        "ids": (a.node_osm_id, a.edge_u, a.edge_v, a.edge_key),
+    }  # fmt: skip
+    made: NetworkInputs = _made(*(fields[name] for name in _FIELDS))
     _local.last = (routing, made)
     return made
