@@ -3,23 +3,18 @@
 from __future__ import annotations
 
 import csv
-import importlib.util
 import math
-import sys
-from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
-_spec = importlib.util.spec_from_file_location(
-    "benchmarks_compare_peers", ROOT / "benchmarks" / "compare_peers.py"
-)
-assert _spec is not None
-assert _spec.loader is not None
-cp = importlib.util.module_from_spec(_spec)
-sys.modules[_spec.name] = cp
-_spec.loader.exec_module(cp)
+from tests.benchmarks.scripts import load_script
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+cp = load_script("compare_peers.py")
 
 PROJ = cp.scoring.LocalProjection(7.42, 43.73)
 

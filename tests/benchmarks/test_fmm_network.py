@@ -6,7 +6,6 @@ it has not been built (``bash benchmarks/peers/setup.sh`` builds it into ``.benc
 
 from __future__ import annotations
 
-import importlib.util
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -16,19 +15,13 @@ import pyproj
 import pytest
 
 import roadnets
+from tests.benchmarks.scripts import load_script
 
 ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT / "tests" / "data"
 FMM_BUILD = ROOT / ".bench" / "fmm" / "src" / "build"
 
-_spec = importlib.util.spec_from_file_location(
-    "benchmarks_fmm_network", ROOT / "benchmarks" / "peers" / "fmm_network.py"
-)
-assert _spec is not None
-assert _spec.loader is not None
-fmm_network = importlib.util.module_from_spec(_spec)
-sys.modules[_spec.name] = fmm_network
-_spec.loader.exec_module(fmm_network)
+fmm_network = load_script("peers/fmm_network.py")
 
 
 @pytest.fixture(scope="module")

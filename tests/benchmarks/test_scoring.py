@@ -2,21 +2,14 @@
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-_PATH = Path(__file__).resolve().parents[2] / "benchmarks" / "scoring.py"
-_spec = importlib.util.spec_from_file_location("benchmarks_scoring", _PATH)
-assert _spec is not None
-assert _spec.loader is not None
-scoring = importlib.util.module_from_spec(_spec)
-sys.modules[_spec.name] = scoring
-_spec.loader.exec_module(scoring)
+from tests.benchmarks.scripts import load_script
+
+scoring = load_script("scoring.py")
 
 LON0, LAT0 = 7.42, 43.73
 PROJ = scoring.LocalProjection(LON0, LAT0)

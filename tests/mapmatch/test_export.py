@@ -3,11 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import json
 import pickle
-import sys
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -18,20 +15,13 @@ from mapmatch import export
 from mapmatch._jsontext import py_round
 from mapmatch.evaluation.simulate import SimulationConfig, simulate_trips
 from mapmatch.viz import candidate_table
+from tests.benchmarks.scripts import load_script
 
 if TYPE_CHECKING:
     import roadnets
 
-ROOT = Path(__file__).resolve().parents[2]
 
-_spec = importlib.util.spec_from_file_location(
-    "bench_export", ROOT / "benchmarks" / "bench_export.py"
-)
-assert _spec is not None
-assert _spec.loader is not None
-bench_export = importlib.util.module_from_spec(_spec)
-sys.modules[_spec.name] = bench_export
-_spec.loader.exec_module(bench_export)
+bench_export = load_script("bench_export.py")
 
 
 def _legacy_text(result: mapmatch.MatchResult) -> bytes:
