@@ -11,6 +11,7 @@ instead of 8-9 us a match.
 from __future__ import annotations
 
 import threading
+import weakref
 from typing import TYPE_CHECKING, Any
 
 from numba import njit
@@ -64,14 +65,15 @@ def network_inputs(net: RoadNetwork) -> NetworkInputs:
     """
     The :class:`NetworkInputs` of ``net`` for the calling thread, made once.
 
-    Made again when :func:`~mapmatch.hmm.transition.route_inputs` changes (another network,
-    or its route table arrived), which it keeps per thread.
+    Made again when the thread matches on another network, or the network's route table
+    arrived (:func:`~mapmatch.hmm.transition.route_inputs` reads it).
     """
-    routing = route_inputs(net)
-    last = getattr(_local, "last", None)
-    if last is not None and last[0] is routing:
-        held: NetworkInputs = last[1]
+    table = net.precomputed_routes
+    last = getattr(_local, "last", None)  # this thread's last network, as it was then
+    if last is not None and last[0]() is net and last[1] is table:
+        held: NetworkInputs = last[2]
         return held
+    routing = route_inputs(net)
     a, geom = net.arrays, network_geometry(net)
     fields = {
         "routing": routing,
@@ -84,5 +86,5 @@ def network_inputs(net: RoadNetwork) -> NetworkInputs:
         "ids": (a.node_osm_id, a.edge_u, a.edge_v, a.edge_key),
     }  # fmt: skip
     made: NetworkInputs = _made(*(fields[name] for name in _FIELDS))
-    _local.last = (routing, made)
+    _local.last = (weakref.ref(net), table, made)
     return made

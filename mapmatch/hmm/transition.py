@@ -17,8 +17,6 @@ its routes searched (or looked up in a precomputed table) from inside.
 
 from __future__ import annotations
 
-import threading
-import weakref
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -533,15 +531,12 @@ def route_inputs(net: RoadNetwork) -> tuple[Any, ...]:
     The network's search arrays and this thread's scratch (:mod:`roadnets.routes`), and the
     precomputed route table of :meth:`~roadnets.RoadNetwork.precompute_routes` when the
     network has one the matcher's searches may use (by length, the default U-turn cost);
-    a table with bound ``-inf`` otherwise.
+    a table with bound ``-inf`` otherwise. Kept per thread with the rest of the network's
+    kernel inputs (:func:`~mapmatch.hmm.network_inputs.network_inputs`).
     """
     from roadnets.routes import DEFAULT_UTURN_COST_M, scratch, search_graph
 
     table = net.precomputed_routes
-    last = getattr(_last_inputs, "last", None)  # this thread's last network, as it was then
-    if last is not None and last[0]() is net and last[1] is table:
-        inputs: tuple[Any, ...] = last[2]
-        return inputs
     ws, group = scratch(net.arrays, net.turns)
     graph = search_graph(net.arrays, net.turns)
     if table is not None and not table.weighted and table.uturn_cost_m == DEFAULT_UTURN_COST_M:
@@ -551,10 +546,4 @@ def route_inputs(net: RoadNetwork) -> tuple[Any, ...]:
              table.pred)  # fmt: skip
     else:
         t = _NO_TABLE
-    inputs = graph, ws, group, DEFAULT_UTURN_COST_M, t
-    _last_inputs.last = (weakref.ref(net), table, inputs)
-    return inputs
-
-
-#: Per thread, the last network's :func:`route_inputs` (a match reads them several times).
-_last_inputs = threading.local()
+    return graph, ws, group, DEFAULT_UTURN_COST_M, t
