@@ -58,6 +58,9 @@ class NetworkArrays:
     geom_cum_m
         Distance along the edge from its start to each vertex, metres (geodesic: the sum of
         the geodesic lengths of the segments before it).
+    geom_lon, geom_lat
+        The vertices in WGS84 degrees: ``geom_x``/``geom_y`` unprojected once, so that a
+        path's geometry is read, not unprojected again, for every result.
     out_ptr, out_edge
         CSR adjacency: edges leaving node ``n`` are ``out_edge[out_ptr[n]:out_ptr[n + 1]]``.
     seg_start, seg_edge
@@ -95,6 +98,8 @@ class NetworkArrays:
     geom_x: FloatArray
     geom_y: FloatArray
     geom_cum_m: FloatArray
+    geom_lon: FloatArray
+    geom_lat: FloatArray
     out_ptr: IntArray
     out_edge: Int32Array
     seg_start: IntArray

@@ -33,7 +33,7 @@ __all__ = [
 ]
 
 #: Bump whenever the compiled arrays change meaning; old entries are then ignored.
-FORMAT_VERSION = 6
+FORMAT_VERSION = 7
 
 #: The one file holding every array of an entry (layout and checksum in meta.json).
 ARRAYS_FILE = "arrays.bin"

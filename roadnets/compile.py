@@ -141,7 +141,7 @@ def compile_network(extract: OsmExtract, projector: Projector) -> NetworkArrays:
             names[way.way_id] = label
     if duplicates:
         _log.info("%d directed edges drawn twice by overlapping ways kept once", duplicates)
-    return _to_arrays(node_index, node_xy, edges, geoms, extract.restrictions, names)
+    return _to_arrays(node_index, node_xy, edges, geoms, extract.restrictions, names, projector)
 
 
 def _node(
@@ -161,6 +161,7 @@ def _to_arrays(
     geoms: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
     restrictions: list[TurnRestriction],
     names: dict[int, str],
+    projector: Projector,
 ) -> NetworkArrays:
     n_nodes, n_edges = len(node_xy), len(edges)
     node_osm_id = np.fromiter(node_index.keys(), dtype=np.int64, count=n_nodes)
@@ -184,6 +185,7 @@ def _to_arrays(
     step[inside] = np.concatenate([g[2] for g in geoms])
     cum = np.concatenate(([0.0], np.cumsum(step)))
     geom_cum = cum - np.repeat(cum[geom_ptr[:-1]], sizes)
+    geom_lon, geom_lat = projector.inverse(geom_x, geom_y)
     length = geom_cum[geom_ptr[1:] - 1].copy()
 
     order = np.argsort(u, kind="stable")
@@ -217,6 +219,8 @@ def _to_arrays(
         geom_x=geom_x,
         geom_y=geom_y,
         geom_cum_m=geom_cum,
+        geom_lon=np.asarray(geom_lon, dtype=np.float64),
+        geom_lat=np.asarray(geom_lat, dtype=np.float64),
         out_ptr=out_ptr,
         out_edge=order.astype(np.int32),
         seg_start=seg_start.astype(np.int64),

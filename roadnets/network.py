@@ -468,18 +468,22 @@ class RoadNetwork:
         :meth:`path_polyline`'s vertices in WGS84 lon/lat degrees (:meth:`unproject`).
 
         One compiled call for a network in a :meth:`~roadnets.projection.Projector.local` CRS
-        (:func:`~roadnets.spatial_kernels.path_lonlat_kernel`), the same numbers.
+        (:func:`~roadnets.spatial_kernels.path_lonlat_kernel`), the same numbers: the network's
+        vertices are read from ``geom_lon``/``geom_lat``, only the points between them
+        unprojected.
         """
         compiled = self.projector.compiled
         if compiled is None:
             return self.unproject(*self.path_polyline(edge, start_m, end_m))
         from roadnets.spatial_kernels import path_lonlat_kernel
 
+        a = self.arrays
         lon, lat = path_lonlat_kernel(
             np.ascontiguousarray(edge, dtype=np.int64),
             np.ascontiguousarray(start_m, dtype=np.float64),
             np.ascontiguousarray(end_m, dtype=np.float64),
             self.kernel_geometry,
+            (a.geom_lon, a.geom_lat),
             compiled.inverse_parameters,
         )
         return lon, lat
@@ -495,7 +499,7 @@ class RoadNetwork:
     def bbox(self) -> tuple[float, float, float, float]:
         """``(min_lon, min_lat, max_lon, max_lat)`` of the road geometry (every vertex)."""
         a = self.arrays
-        lon, lat = self.unproject(a.geom_x, a.geom_y)
+        lon, lat = a.geom_lon, a.geom_lat
         return float(lon.min()), float(lat.min()), float(lon.max()), float(lat.max())
 
     def info(self) -> NetworkInfo:

@@ -302,13 +302,60 @@ def points_on_edges(edge, offset, edge_len, geom_ptr, geom_x, geom_y, geom_cum, 
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _append(xs, ys, n, x, y):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    """Append ``(x, y)`` unless it lies within 1e-9 m of the last point; the new count."""
+def _append(xs, ys, vertex, n, x, y, v):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """
+    Append ``(x, y)``, network vertex ``v`` (-1: a point between vertices); the new count.
+
+    Not when it lies within 1e-9 m of the last point.
+    """
     if n > 0 and abs(x - xs[n - 1]) < 1e-9 and abs(y - ys[n - 1]) < 1e-9:
         return n
     xs[n] = x
     ys[n] = y
+    vertex[n] = v
     return n + 1
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _end_vertex(e, x, y, geom_ptr, geom_x, geom_y):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """Edge ``e``'s first or last vertex if ``(x, y)`` is exactly that vertex, else -1."""
+    for v in (geom_ptr[e], geom_ptr[e + 1] - 1):
+        if x == geom_x[v] and y == geom_y[v]:
+            return v
+    return -1
+
+
+@njit(cache=True, nogil=True)
+def _path_walk(edge, start_m, end_m, geom):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """
+    :func:`path_polyline_kernel`'s points, and the network vertex each one is (-1: none).
+
+    A stretch's end counts as its edge's end vertex only where it is that vertex exactly.
+    """
+    geom_ptr, geom_x, geom_y, geom_cum_m = geom[1], geom[2], geom[3], geom[4]
+    cap = 2 * len(edge)
+    for k in range(len(edge)):
+        cap += geom_ptr[edge[k] + 1] - geom_ptr[edge[k]]
+    xs = np.empty(cap)
+    ys = np.empty(cap)
+    vertex = np.empty(cap, dtype=np.int64)
+    n = 0
+    for k in range(len(edge)):
+        e, lo, hi = edge[k], start_m[k], end_m[k]
+        sx, sy = point_on_edge(e, lo, *geom)
+        ex, ey = point_on_edge(e, hi, *geom)
+        sv = _end_vertex(e, sx, sy, geom_ptr, geom_x, geom_y)
+        ev = _end_vertex(e, ex, ey, geom_ptr, geom_x, geom_y)
+        if lo - 1.0 > hi + 1.0:  # backwards: no vertex lies between
+            n = _append(xs, ys, vertex, n, ex, ey, ev)
+            n = _append(xs, ys, vertex, n, sx, sy, sv)
+            continue
+        n = _append(xs, ys, vertex, n, sx, sy, sv)
+        for v in range(geom_ptr[e], geom_ptr[e + 1]):
+            if lo < geom_cum_m[v] < hi:
+                n = _append(xs, ys, vertex, n, geom_x[v], geom_y[v], v)
+        n = _append(xs, ys, vertex, n, ex, ey, ev)
+    return xs[:n], ys[:n], vertex[:n]
 
 
 @njit(cache=True, nogil=True)
@@ -322,35 +369,41 @@ def path_polyline_kernel(edge, start_m, end_m, geom):  # type: ignore[no-untyped
     end first when it lies more than 2 m before the start); a point within 1e-9 m of the one
     before it is left out.
     """
-    geom_ptr, geom_x, geom_y, geom_cum_m = geom[1], geom[2], geom[3], geom[4]
-    cap = 2 * len(edge)
-    for k in range(len(edge)):
-        cap += geom_ptr[edge[k] + 1] - geom_ptr[edge[k]]
-    xs = np.empty(cap)
-    ys = np.empty(cap)
-    n = 0
-    for k in range(len(edge)):
-        e, lo, hi = edge[k], start_m[k], end_m[k]
-        sx, sy = point_on_edge(e, lo, *geom)
-        ex, ey = point_on_edge(e, hi, *geom)
-        if lo - 1.0 > hi + 1.0:  # backwards: no vertex lies between
-            n = _append(xs, ys, n, ex, ey)
-            n = _append(xs, ys, n, sx, sy)
-            continue
-        n = _append(xs, ys, n, sx, sy)
-        for v in range(geom_ptr[e], geom_ptr[e + 1]):
-            if lo < geom_cum_m[v] < hi:
-                n = _append(xs, ys, n, geom_x[v], geom_y[v])
-        n = _append(xs, ys, n, ex, ey)
-    return xs[:n], ys[:n]
+    xs, ys, _ = _path_walk(edge, start_m, end_m, geom)
+    return xs, ys
 
 
 @njit(cache=True, nogil=True)
-def path_lonlat_kernel(edge, start_m, end_m, geom, inverse):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+def path_lonlat_kernel(edge, start_m, end_m, geom, vertex_lonlat, inverse):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     """
     :func:`path_polyline_kernel`'s vertices unprojected to WGS84 lon/lat degrees, in one call.
 
-    ``inverse`` is the network's :attr:`~roadnets.tmerc.TransverseMercator.inverse_parameters`.
+    ``vertex_lonlat`` is the network's ``(geom_lon, geom_lat)``: the vertices' own degrees,
+    read rather than unprojected again (the same numbers); only the points between vertices
+    (a path's ends, mostly) are unprojected, by ``inverse``, the network's
+    :attr:`~roadnets.tmerc.TransverseMercator.inverse_parameters`.
     """
-    x, y = path_polyline_kernel(edge, start_m, end_m, geom)
-    return inverse_kernel(x, y, *inverse)
+    geom_lon, geom_lat = vertex_lonlat
+    xs, ys, vertex = _path_walk(edge, start_m, end_m, geom)
+    n = len(xs)
+    lon, lat = np.empty(n), np.empty(n)
+    between = 0
+    for k in range(n):
+        if vertex[k] < 0:
+            between += 1
+    bx, by = np.empty(between), np.empty(between)
+    j = 0
+    for k in range(n):
+        if vertex[k] < 0:
+            bx[j], by[j] = xs[k], ys[k]
+            j += 1
+    blon, blat = inverse_kernel(bx, by, *inverse)
+    j = 0
+    for k in range(n):
+        v = vertex[k]
+        if v < 0:
+            lon[k], lat[k] = blon[j], blat[j]
+            j += 1
+        else:
+            lon[k], lat[k] = geom_lon[v], geom_lat[v]
+    return lon, lat

@@ -191,7 +191,7 @@ def network_lines(net: RoadNetwork, box_m: tuple[float, float, float, float]) ->
         return []
     sizes = ptr[chosen + 1] - ptr[chosen]
     vertex = np.repeat(ptr[chosen] - np.cumsum(sizes) + sizes, sizes) + np.arange(int(sizes.sum()))
-    lon, lat = net.unproject(a.geom_x[vertex], a.geom_y[vertex])
+    lon, lat = a.geom_lon[vertex], a.geom_lat[vertex]
     bounds = np.concatenate(([0], np.cumsum(sizes)))
     lines = []
     for i, e in enumerate(chosen.tolist()):
@@ -221,7 +221,7 @@ def edge_line(net: RoadNetwork, edge: int) -> tuple[FloatArray, FloatArray]:
     """Return the whole geometry of one edge, WGS84 degrees, in driving order."""
     a = net.arrays
     lo, hi = int(a.edge_geom_ptr[edge]), int(a.edge_geom_ptr[edge + 1])
-    return net.unproject(np.asarray(a.geom_x[lo:hi]), np.asarray(a.geom_y[lo:hi]))
+    return np.asarray(a.geom_lon[lo:hi]), np.asarray(a.geom_lat[lo:hi])
 
 
 def candidate_table(result: MatchResult, net: RoadNetwork, fix: int) -> pd.DataFrame:

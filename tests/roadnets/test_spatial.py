@@ -143,13 +143,19 @@ def test_path_polyline_joins_edge_stretches(default_net: roadnets.RoadNetwork) -
 
 
 def test_path_lonlat_is_the_unprojected_polyline(default_net: roadnets.RoadNetwork) -> None:
-    # one compiled call gives the numbers of path_polyline then unproject, bit for bit; a
-    # network in a CRS the compiled projection does not cover still gets them through pyproj
+    # one compiled call gives the numbers of path_polyline then unproject, bit for bit: the
+    # vertices read from the network's own degrees, whole edges' ends among them, the points
+    # between vertices and a backwards stretch's unprojected; a network in a CRS the
+    # compiled projection does not cover still gets them through pyproj
     a = default_net.arrays
     rng = np.random.default_rng(5)
     edge = rng.integers(0, a.n_edges, 12)
     start = rng.random(12) * a.edge_length_m[edge]
     end = start + rng.random(12) * (a.edge_length_m[edge] - start)
+    whole = rng.integers(0, a.n_edges, 6)
+    edge = np.concatenate((edge, whole, edge[:1]))
+    start = np.concatenate((start, np.zeros(6), end[:1]))
+    end = np.concatenate((end, a.edge_length_m[whole], start[:1] - 5.0))
     elsewhere = dataclasses.replace(default_net, projector=Projector("EPSG:32632"))
     for net in (default_net, elsewhere):
         want = net.unproject(*net.path_polyline(edge, start, end))
