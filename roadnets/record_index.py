@@ -86,7 +86,7 @@ def record_index(
     return index_ptr, slots
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def find_record(ptr, state, index_ptr, slots, block, wanted):  # type: ignore[no-untyped-def]  # pragma: no cover
     """Record of state ``wanted`` in block ``block`` (-1: no such record, or ``block < 0``)."""
     if block < 0:

@@ -92,7 +92,7 @@ def _logaddexp(x, y):  # type: ignore[no-untyped-def]  # pragma: no cover - comp
     return tmp
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def distance_score(distance, sigma, params):  # type: ignore[no-untyped-def]  # pragma: no cover
     """Gaussian log emission of a distance, floored at ``-max_emission_penalty``."""
     em = -0.5 * (distance / sigma) ** 2
@@ -102,7 +102,7 @@ def distance_score(distance, sigma, params):  # type: ignore[no-untyped-def]  # 
     return em
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def speed_weight(speed, params):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     """How much the heading counts at ``speed`` (0 when unknown)."""
     lo, hi = params[P_HEADING_MIN_SPEED], params[P_HEADING_FULL_SPEED]
@@ -137,7 +137,7 @@ def chord_pace(used, x, y, time_s):  # type: ignore[no-untyped-def]  # pragma: n
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def road_class_score(edge_class, speed, pace, params):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     """
     Log prior of the road's class at the car's speed.
@@ -157,13 +157,13 @@ def road_class_score(edge_class, speed, pace, params):  # type: ignore[no-untype
     return 0.0
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def angle_between(a, b):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     """Absolute difference of two directions, degrees in [0, 180] (NaN when one is NaN)."""
     return abs((a - b + 180.0) % 360.0 - 180.0)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def heading_score(heading, bearing, weight, params):  # type: ignore[no-untyped-def]  # pragma: no cover
     """Weighted log-likelihood of the heading given the road direction (0 when unknown)."""
     diff = angle_between(heading, bearing)

@@ -116,7 +116,7 @@ def _travel_tolerance(travel, slack, params):  # type: ignore[no-untyped-def]  #
     return params[P_TRAVEL_TOLERANCE_M] + params[P_TRAVEL_TOLERANCE_FRAC] * travel + slack
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def transition_score(gc, route, time, uturn, dt, sigma, travel, slack, penalty, params):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
     :func:`log_transition` of one pair: ``uturn`` whether it turns, ``penalty`` what that costs.
@@ -346,7 +346,7 @@ def route_arrivals(fits, searched, rec, table, state_edge, from_edge):  # type: 
     return _arrivals_of(rec, searched[7], searched[3], state_edge, from_edge)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def dead_end_ahead(edge, trans_ptr, trans_to, state_edge, edge_twin):  # type: ignore[no-untyped-def]  # pragma: no cover
     """Whether ``edge`` ends where the only way on is back along its own road (a dead end)."""
     twin = edge_twin[edge]

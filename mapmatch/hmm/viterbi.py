@@ -162,7 +162,7 @@ def viterbi_arrivals_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover
     return states, starts, total, moved
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _logsumexp(values, n):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     """log(sum(exp(values[:n]))); ``-inf`` entries (padding) add nothing and are skipped."""
     top = -np.inf
