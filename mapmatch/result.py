@@ -349,7 +349,7 @@ class Stretches:
         Cut the network's geometry: each edge between its two offsets, ends interpolated.
 
         Vectorised over the stretches (the edge's vertices strictly between the offsets are
-        kept, in order).
+        kept, in order, in the network's own degrees; only the ends are unprojected).
         """
         a = net.arrays
         n = len(edge)
@@ -362,12 +362,13 @@ class Stretches:
         ends_x, ends_y = net.point_on_edge(
             np.concatenate((edge, edge)), np.concatenate((start_m, end_m))
         )
-        x = np.concatenate((ends_x[:n], a.geom_x[vertex[inner]], ends_x[n:]))
-        y = np.concatenate((ends_y[:n], a.geom_y[vertex[inner]], ends_y[n:]))
+        ends_lon, ends_lat = net.unproject(ends_x, ends_y)
+        lon = np.concatenate((ends_lon[:n], a.geom_lon[vertex[inner]], ends_lon[n:]))
+        lat = np.concatenate((ends_lat[:n], a.geom_lat[vertex[inner]], ends_lat[n:]))
         key_owner = np.concatenate((np.arange(n), owner[inner], np.arange(n)))
         key_along = np.concatenate((start_m - 1.0, along[inner], end_m + 1.0))
         order = np.lexsort((key_along, key_owner))
-        lon, lat = net.unproject(x[order], y[order])
+        lon, lat = lon[order], lat[order]
         ptr = np.concatenate(([0], np.cumsum(np.bincount(key_owner, minlength=n))))
         return cls(lon=lon, lat=lat, ptr=np.asarray(ptr, dtype=np.int64))
 
