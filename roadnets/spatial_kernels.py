@@ -385,25 +385,8 @@ def path_lonlat_kernel(edge, start_m, end_m, geom, vertex_lonlat, inverse):  # t
     """
     geom_lon, geom_lat = vertex_lonlat
     xs, ys, vertex = _path_walk(edge, start_m, end_m, geom)
-    n = len(xs)
-    lon, lat = np.empty(n), np.empty(n)
-    between = 0
-    for k in range(n):
-        if vertex[k] < 0:
-            between += 1
-    bx, by = np.empty(between), np.empty(between)
-    j = 0
-    for k in range(n):
-        if vertex[k] < 0:
-            bx[j], by[j] = xs[k], ys[k]
-            j += 1
-    blon, blat = inverse_kernel(bx, by, *inverse)
-    j = 0
-    for k in range(n):
-        v = vertex[k]
-        if v < 0:
-            lon[k], lat[k] = blon[j], blat[j]
-            j += 1
-        else:
-            lon[k], lat[k] = geom_lon[v], geom_lat[v]
+    read = np.maximum(vertex, 0)  # the points between vertices are overwritten below
+    lon, lat = geom_lon[read], geom_lat[read]
+    between = np.flatnonzero(vertex < 0)
+    lon[between], lat[between] = inverse_kernel(xs[between], ys[between], *inverse)
     return lon, lat
