@@ -7,7 +7,11 @@ writes them twice, as **positions only** (``trace_id,time,lon,lat``) and as **fu
 venv (``benchmarks/peers/run_<peer>.py``; one process, one thread; load timed apart; one
 warm-up trace; then every trace matched ``--repeats`` times and the median pass timed; the
 timed part includes building the output a user gets: our GeoJSON, FMM's path in lon/lat).
-A peer that can only use positions runs once per set and its row stands in both classes.
+The peers of one trace file run side by side, loaded one after the other and then timed one
+pass each in turn (``--back-to-back``: each peer's passes in one block instead), so that all
+meet the same slow and fast spells of a shared machine. A peer that can only use positions
+runs again beside our full-input run; the slow pure-Python peers run once per set and their
+row stands in both classes.
 Every matched geometry is scored the same way (``benchmarks/scoring.py``: route mismatch, and
 the matched length against the true one), and one markdown table plus JSON are written.
 
@@ -26,12 +30,14 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import datetime as dt
 import json
 import math
 import os
 import platform
+import select
 import statistics
 import subprocess
 import sys
@@ -323,52 +329,172 @@ def peer_available(peer: Peer) -> tuple[bool, str]:
     return True, ""
 
 
-def run_job(
-    peer: Peer,
-    extract: Path,
-    traces_csv: Path,
-    params: dict[str, Any],
-    repeats: int,
-    min_time_s: float,
-    work: Path,
-    timeout_s: float,
-) -> tuple[dict[str, Any] | None, str | None, float]:
-    """Run one peer on one trace file; return (result, error, wall seconds of the process)."""
-    work.mkdir(parents=True, exist_ok=True)
-    out_path = work / f"{peer.name}.result.json"
-    job: dict[str, Any] = {
-        "extract": str(extract),
-        "traces_csv": str(traces_csv),
-        "params": params,
-        "repeats": repeats,
-        "min_time_s": min_time_s,
-        "out": str(out_path),
-    }
-    job_path = work / f"{peer.name}.job.json"
-    job_path.write_text(json.dumps(job, indent=1))
-    env = os.environ | SINGLE_THREAD_ENV | peer.env
-    if peer.name == "valhalla":  # its console scripts look themselves up on PATH
-        env["PATH"] = f"{peer.python.parent}{os.pathsep}{env.get('PATH', '')}"
-    t0 = time.perf_counter()
-    log = work / f"{peer.name}.log"
-    try:
-        with log.open("w") as lf:
-            r = subprocess.run(
-                [str(peer.python), str(peer.script), str(job_path)],
-                stdout=lf,
+@dataclass(frozen=True, slots=True)
+class Job:
+    """One peer on one trace file: what its runner's job file says."""
+
+    peer: Peer
+    extract: Path
+    traces_csv: Path
+    params: dict[str, Any]
+    repeats: int
+    min_time_s: float
+    work: Path
+
+    @property
+    def out_path(self) -> Path:
+        return self.work / f"{self.peer.name}.result.json"
+
+    @property
+    def log_path(self) -> Path:
+        return self.work / f"{self.peer.name}.log"
+
+    def wants_pass(self, runs: list[float]) -> bool:
+        """Whether the runner's rule asks for another pass after ``runs``."""
+        return len(runs) < self.repeats or (sum(runs) < self.min_time_s and len(runs) < _MAX_PASSES)
+
+    def start(self, control: tuple[int, int] | None = None) -> subprocess.Popen[bytes]:
+        """Write the job file and start the runner (with the two pipes of ``control``)."""
+        self.work.mkdir(parents=True, exist_ok=True)
+        self.out_path.unlink(missing_ok=True)
+        job: dict[str, Any] = {
+            "extract": str(self.extract),
+            "traces_csv": str(self.traces_csv),
+            "params": self.params,
+            "repeats": self.repeats,
+            "min_time_s": self.min_time_s,
+            "out": str(self.out_path),
+        }
+        if control is not None:
+            job["control"] = list(control)
+        job_path = self.work / f"{self.peer.name}.job.json"
+        job_path.write_text(json.dumps(job, indent=1))
+        env = os.environ | SINGLE_THREAD_ENV | self.peer.env
+        if self.peer.name == "valhalla":  # its console scripts look themselves up on PATH
+            env["PATH"] = f"{self.peer.python.parent}{os.pathsep}{env.get('PATH', '')}"
+        with self.log_path.open("w") as log:
+            return subprocess.Popen(
+                [str(self.peer.python), str(self.peer.script), str(job_path)],
+                stdout=log,
                 stderr=subprocess.STDOUT,
-                timeout=timeout_s,
                 env=env,
-                cwd=str(work),
-                check=False,
+                cwd=str(self.work),
+                pass_fds=control or (),
             )
+
+    def outcome(self, returncode: int | None, wall: float) -> JobOutcome:
+        """The result file the runner wrote, or what went wrong (the log's last lines)."""
+        if returncode != 0 or not self.out_path.exists():
+            tail = self.log_path.read_text(errors="replace").strip().splitlines()[-3:]
+            return None, f"exit {returncode}: {' | '.join(tail)}", wall
+        return json.loads(self.out_path.read_text()), None, wall
+
+
+#: What running a job gives: (result, error, wall seconds of the process).
+JobOutcome = tuple[dict[str, Any] | None, str | None, float]
+#: The runners' cap on passes (``benchmarks/peers/common.py``).
+_MAX_PASSES = 1000
+
+
+def run_job(job: Job, timeout_s: float) -> JobOutcome:
+    """Run one peer on one trace file, its passes back to back."""
+    t0 = time.perf_counter()
+    proc = job.start()
+    try:
+        returncode = proc.wait(timeout=timeout_s)
     except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
         return None, f"timeout after {timeout_s:.0f} s", time.perf_counter() - t0
-    wall = time.perf_counter() - t0
-    if r.returncode != 0 or not out_path.exists():
-        tail = log.read_text(errors="replace").strip().splitlines()[-3:]
-        return None, f"exit {r.returncode}: {' | '.join(tail)}", wall
-    return json.loads(out_path.read_text()), None, wall
+    return job.outcome(returncode, time.perf_counter() - t0)
+
+
+@dataclass(slots=True)
+class _Turns:
+    """A runner taking passes in turns: its process, pipes, passes so far and deadline."""
+
+    job: Job
+    proc: subprocess.Popen[bytes]
+    commands: Any
+    answers: Any
+    started: float
+    deadline: float
+    runs: list[float] = field(default_factory=list)
+    error: str | None = None
+
+    def ask(self, command: str) -> str:
+        """Send a command, and wait (until the deadline) for the answer line ('' on none)."""
+        try:
+            if command:
+                self.commands.write(command + "\n")
+                self.commands.flush()
+            left = self.deadline - time.perf_counter()
+            ready, _, _ = select.select([self.answers], [], [], max(left, 0.0))
+            return self.answers.readline().strip() if ready else ""
+        except OSError:  # the runner is gone
+            return ""
+
+    def fail(self, why: str) -> None:
+        self.error = why
+        self.proc.kill()
+
+
+def run_jobs_in_turns(jobs: list[Job], timeout_s: float) -> list[JobOutcome]:
+    """
+    Run the peers of one trace file side by side: one pass of each in turn, round after round.
+
+    Each runner is started, loads and warms up alone (its load time is its own), then waits;
+    every round asks each runner that still wants passes (its ``repeats`` and ``min_time_s``)
+    for one. On a shared machine whose speed drifts from one spell to the next, every peer's
+    median pass then comes from the same spells, which back-to-back jobs do not give: a slow
+    spell over one peer's whole job moved a ratio by up to 2x.
+    """
+    turns: list[_Turns] = []
+    for job in jobs:
+        command_read, command_write = os.pipe()
+        answer_read, answer_write = os.pipe()
+        started = time.perf_counter()
+        proc = job.start((command_read, answer_write))
+        os.close(command_read)
+        os.close(answer_write)
+        turn = _Turns(
+            job,
+            proc,
+            os.fdopen(command_write, "w", encoding="ascii"),
+            os.fdopen(answer_read, encoding="ascii"),
+            started,
+            started + timeout_s,
+        )
+        turns.append(turn)
+        if turn.ask("") != "ready":
+            turn.fail("no 'ready' from the runner (it failed, or timed out loading)")
+    while wanting := [t for t in turns if t.error is None and t.job.wants_pass(t.runs)]:
+        for turn in wanting:
+            answer = turn.ask("pass")
+            if not answer.startswith("done "):
+                turn.fail(f"no answer to pass {len(turn.runs) + 1}")
+                continue
+            turn.runs.append(float(answer.split()[1]))
+    outcomes: list[JobOutcome] = []
+    for turn in turns:
+        with contextlib.suppress(OSError):
+            turn.commands.write("end\n")
+            turn.commands.close()
+        try:
+            returncode = turn.proc.wait(timeout=max(turn.deadline - time.perf_counter(), 1.0))
+        except subprocess.TimeoutExpired:
+            turn.fail("timeout")
+            returncode = turn.proc.wait()
+        turn.answers.close()
+        wall = time.perf_counter() - turn.started
+        if turn.error is not None and returncode != 0:
+            tail = turn.job.log_path.read_text(errors="replace").strip().splitlines()[-3:]
+            outcomes.append((None, f"{turn.error}: {' | '.join(tail)}", wall))
+        elif turn.error is not None:
+            outcomes.append((None, turn.error, wall))
+        else:
+            outcomes.append(turn.job.outcome(returncode, wall))
+    return outcomes
 
 
 @dataclass(frozen=True, slots=True)
@@ -534,17 +660,30 @@ def detail_markdown(rows: list[Row]) -> str:
 def markdown(rows: list[Row], header: dict[str, Any]) -> str:
     """Both tables with a header naming date, cores, repeats and tools."""
     key = [p for p in KEY_PEERS if any(r.peer == p for r in rows)]
+    in_turns = header.get("schedule") == "in turns"
+    schedule = (
+        "the peers of each trace file side by side, one pass each in turn"
+        if in_turns
+        else "each peer's passes back to back, one peer after the other"
+    )
+    reuse = (
+        "leuven and mappymatch use positions only, so their one run stands in both; FMM, "
+        "positions only too, runs again beside our full-input run"
+        if in_turns
+        else "FMM, leuven and mappymatch use positions only, so their one run stands in both"
+    )
     intro = (
         f"Peer comparison, {header['date']}, {header['nproc']} cores ({header['cpu']}), "
-        f"one process and one thread per matcher, median of at least {header['repeats']} timed "
-        f"passes (more until {header['min_time_s']:g} s of matching; leuven: one) after a "
+        f"one process and one thread per matcher, {schedule}, median of at least "
+        f"{header['repeats']} timed passes (more until {header['min_time_s']:g} s of matching; "
+        "leuven: one) after a "
         "warm-up trace (ours: `match` + `geojson_bytes()`; FMM: `match_wkt` + its path in "
         f"lon/lat); {header['traces_per_set']} traces per set from "
         f"{header['trace_source']}, outlier rate {header['outlier_rate']:g} (40 m); "
         f"scoring tolerance {scoring.DEFAULT_TOLERANCE_M:g} m, direction within "
         f"{scoring.DEFAULT_MAX_ANGLE_DEG:g} deg. Input `positions`: time, lon, lat; `full`: "
-        "plus heading, speed, accuracy, odometer (FMM, leuven and mappymatch use positions "
-        "only, so their one run stands in both; Meili uses the per-point accuracy). "
+        f"plus heading, speed, accuracy, odometer ({reuse}; Meili uses the per-point "
+        "accuracy). "
         f"Our code: {header['ours_tree']} (git HEAD {header['git_head'][:10]} at the start). "
         f"Run wall time {header['wall_s'] / 60:.1f} min; load average "
         f"{header['loadavg_start']:.1f} at the start, {header['loadavg_end']:.1f} at the end "
@@ -645,6 +784,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--out", type=Path, default=None, help="output folder (default .bench/peers/DATE)"
     )
     p.add_argument("--timeout", type=float, default=900.0, help="seconds per peer job")
+    p.add_argument(
+        "--back-to-back",
+        action="store_true",
+        help="run each peer's passes in one block, one peer after the other (default: the "
+        "peers of a trace file side by side, one pass each in turn, so that they meet the same "
+        "spells of a shared machine's speed)",
+    )
     p.add_argument(
         "--ours-tree",
         type=Path,
@@ -767,8 +913,18 @@ def main(argv: list[str] | None = None) -> int:
             set_rows: list[Row] = []
             first_run: dict[str, Row] = {}
             for inp in inputs:
+                # the peers to run on this file, each with its row so far; the others' rows
+                planned: list[tuple[Job, Row, str]] = []
                 for peer in peers:
-                    if inp == "full" and not peer.full_input and peer.name in first_run:
+                    # a positions-only peer's row stands for both inputs; in turns it runs
+                    # again beside our full-input run (the slow pure-Python peers do not)
+                    again = not a.back_to_back and peer.max_repeats is None
+                    if (
+                        inp == "full"
+                        and not peer.full_input
+                        and peer.name in first_run
+                        and not again
+                    ):
                         set_rows.append(replace(first_run[peer.name], input=inp))
                         continue
                     feed = "positions" if not peer.full_input else inp
@@ -784,22 +940,27 @@ def main(argv: list[str] | None = None) -> int:
                         params[key] = dict(value)
                     if peer.needs_fmm and fmm_spec is not None:
                         params["fmm"] = params.get("fmm", {}) | fmm_spec
-                    repeats = min(a.repeats, peer.max_repeats or a.repeats)
-                    print(
-                        f"[compare_peers] {stem} {ts.label} {inp} {peer.name} ...",
-                        end=" ",
-                        flush=True,
-                    )
-                    res, err, wall = run_job(
+                    job = Job(
                         peer,
                         extract,
                         csvs[feed],
                         params,
-                        repeats,
+                        min(a.repeats, peer.max_repeats or a.repeats),
                         a.min_time if peer.max_repeats is None else 0.0,
                         set_dir / "runs" / feed,
-                        a.timeout,
                     )
+                    planned.append((job, row0, feed))
+                names_run = ", ".join(job.peer.name for job, _, _ in planned)
+                how = "back to back" if a.back_to_back else "in turns"
+                print(f"[compare_peers] {stem} {ts.label} {inp}: {names_run} ({how})", flush=True)
+                jobs = [job for job, _, _ in planned]
+                if a.back_to_back:
+                    outcomes = [run_job(job, a.timeout) for job in jobs]
+                else:
+                    outcomes = run_jobs_in_turns(jobs, a.timeout)
+                for (job, row0, feed), (res, err, wall) in zip(planned, outcomes, strict=True):
+                    peer = job.peer
+                    print(f"[compare_peers]   {peer.name}:", end=" ", flush=True)
                     if res is None:
                         print(f"FAILED ({err})", flush=True)
                         row = replace(row0, error=err)
@@ -889,6 +1050,7 @@ def main(argv: list[str] | None = None) -> int:
         "traces_per_set": a.traces,
         "repeats": a.repeats,
         "min_time_s": a.min_time,
+        "schedule": "back to back" if a.back_to_back else "in turns",
         "fmm": fmm_files,
         "command": " ".join([Path(sys.executable).name, *sys.argv]),
         "ours_tree": str(a.ours_tree) if a.ours_tree else "installed package",

@@ -12,6 +12,11 @@ machine inflates far less). It writes ``{"peer", "load_s", "match_s", "match_s_r
 "match_cpu_s", "points", "peak_rss_mb", "settings", "results": [...]}`` where each result (from
 the first pass) is
 ``{"trace_id", "geometry": [[[lon, lat], ...], ...], "error"}``.
+
+With ``"control": [COMMAND_FD, ANSWER_FD]`` in the job (two pipes the process inherits), the
+runner says ``ready`` after the warm-up and runs each pass when told to instead
+(:func:`serve_passes`): ``compare_peers.py`` runs the peers of one trace file side by side
+that way, pass for pass in turns.
 """
 
 from __future__ import annotations
@@ -125,13 +130,13 @@ def run_peer(
             match(ctx, inputs[0])
         except Exception:
             traceback.print_exc()
-    repeats = max(1, int(job.get("repeats", 1)))
-    min_time_s = float(job.get("min_time_s", 0.0))
     runs: list[float] = []
     cpu_runs: list[float] = []
     results: list[dict[str, Any]] = []
-    k = 0
-    while k < repeats or (sum(runs) < min_time_s and k < _MAX_PASSES):
+
+    def one_pass() -> tuple[float, float]:
+        """Match every trace once; the seconds and CPU seconds of the matching calls."""
+        first = not runs
         total = cpu = 0.0
         for tr, prepared in zip(traces, inputs, strict=True):
             t1, c1 = time.perf_counter(), time.process_time()
@@ -140,13 +145,13 @@ def run_peer(
             except Exception as exc:
                 total += time.perf_counter() - t1
                 cpu += time.process_time() - c1
-                if k == 0:
+                if first:
                     error = f"{type(exc).__name__}: {exc}"
                     results.append({"trace_id": tr.trace_id, "geometry": [], "error": error})
                 continue
             total += time.perf_counter() - t1
             cpu += time.process_time() - c1
-            if k > 0:
+            if not first:
                 continue
             try:
                 geom = geometry(ctx, tr, raw)
@@ -156,7 +161,17 @@ def run_peer(
                 results.append({"trace_id": tr.trace_id, "geometry": [], "error": error})
         runs.append(total)
         cpu_runs.append(cpu)
-        k += 1
+        return total, cpu
+
+    if "control" in job:  # passes on command, in turns with the other peers' processes
+        serve_passes(job["control"], one_pass)
+        if not runs:  # told to stop before any pass: one, so the result has a time
+            one_pass()
+    else:
+        repeats = max(1, int(job.get("repeats", 1)))
+        min_time_s = float(job.get("min_time_s", 0.0))
+        while len(runs) < repeats or (sum(runs) < min_time_s and len(runs) < _MAX_PASSES):
+            one_pass()
     match_s = statistics.median(runs)
     out = {
         "peer": peer,
@@ -172,6 +187,29 @@ def run_peer(
     }
     Path(job["out"]).write_text(json.dumps(out))
     return 0
+
+
+def serve_passes(control: list[int], one_pass: Callable[[], tuple[float, float]]) -> None:
+    """
+    Run passes when told to, so that several peers' processes take turns pass by pass.
+
+    ``control`` is two inherited file descriptors: commands come in on the first (``pass``:
+    run one and answer ``done SECONDS CPU_SECONDS``; ``end``: stop), answers go out on the
+    second, which first says ``ready``. Peers on one machine then meet the same slow and
+    fast spells of a shared CPU, and their ratios compare like with like.
+    """
+    commands = open(control[0], encoding="ascii")  # noqa: SIM115 - closed at the end
+    answers = open(control[1], "w", encoding="ascii")  # noqa: SIM115
+    answers.write("ready\n")
+    answers.flush()
+    for line in commands:
+        if line.strip() != "pass":
+            break
+        total, cpu = one_pass()
+        answers.write(f"done {total!r} {cpu!r}\n")
+        answers.flush()
+    commands.close()
+    answers.close()
 
 
 def split_polyline(coords: list[list[float]], breaks: list[int]) -> Geometry:

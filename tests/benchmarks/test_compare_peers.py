@@ -138,3 +138,85 @@ def test_quick_fills_only_what_was_not_given() -> None:
 def test_json_is_strict() -> None:
     cleaned = cp._json_clean({"a": math.nan, "b": [1.0, math.inf], "c": "x"})
     assert cleaned == {"a": None, "b": [1.0, None], "c": "x"}
+
+
+_FAKE_RUNNER = """
+import sys, time
+sys.path.insert(0, {peers!r})
+from common import run_peer
+
+NAME = {name!r}
+SEEN = []
+
+
+def load(job):
+    return {{"log": job["params"]["log"]}}
+
+
+def match(ctx, trace):
+    if trace.trace_id == "t1":  # once a pass (and at the warm-up): which runner
+        with open(ctx["log"], "a") as log:
+            log.write(NAME + "\\n")
+        SEEN.append(NAME)
+        if NAME == "broken" and len(SEEN) == 3:  # dies in its second timed pass
+            raise SystemExit(3)
+    return trace
+
+
+def geometry(ctx, trace, raw):
+    return [[[lon, lat] for lon, lat in zip(raw.lon, raw.lat)]]
+
+
+raise SystemExit(run_peer(NAME, load, match, geometry))
+"""
+
+
+def _fake_jobs(tmp_path: Path, names: list[str], repeats: int) -> tuple[list[object], Path]:
+    """Jobs of runners that note each pass in one shared log, on a two-trace file."""
+    import sys
+
+    traces = tmp_path / "traces.csv"
+    traces.write_text(
+        "trace_id,time,lon,lat\nt1,0,7.0,43.0\nt1,1,7.001,43.0\nt2,0,7.0,43.1\nt2,1,7.0,43.101\n"
+    )
+    log = tmp_path / "passes.log"
+    jobs = []
+    for name in names:
+        script = tmp_path / f"run_{name}.py"
+        script.write_text(_FAKE_RUNNER.format(peers=str(cp.PEERS_DIR), name=name))
+        peer = cp.Peer(name, name, cp.Path(sys.executable), script, False)
+        work = tmp_path / "runs" / name
+        jobs.append(cp.Job(peer, tmp_path, traces, {"log": str(log)}, repeats, 0.0, work))
+    return jobs, log
+
+
+def test_peers_in_turns_take_one_pass_each_round(tmp_path: Path) -> None:
+    jobs, log = _fake_jobs(tmp_path, ["a", "b"], repeats=3)
+    outcomes = cp.run_jobs_in_turns(jobs, 60.0)
+    # the warm-up trace (t1 of each, alone after its load), then the passes alternating
+    assert log.read_text().split() == ["a", "b"] + ["a", "b"] * 3
+    for (res, err, _), name in zip(outcomes, ["a", "b"], strict=True):
+        assert err is None
+        assert res is not None
+        assert res["peer"] == name
+        assert len(res["match_s_runs"]) == 3
+        assert [r["trace_id"] for r in res["results"]] == ["t1", "t2"]
+
+
+def test_peers_back_to_back_run_their_passes_in_one_block(tmp_path: Path) -> None:
+    jobs, log = _fake_jobs(tmp_path, ["a", "b"], repeats=2)
+    outcomes = [cp.run_job(job, 60.0) for job in jobs]
+    assert log.read_text().split() == ["a"] * 3 + ["b"] * 3
+    assert all(err is None for _, err, _ in outcomes)
+
+
+def test_a_runner_that_dies_in_turns_fails_alone(tmp_path: Path) -> None:
+    jobs, log = _fake_jobs(tmp_path, ["a", "broken"], repeats=2)
+    (res_a, err_a, _), (res_b, err_b, _) = cp.run_jobs_in_turns(jobs, 60.0)
+    assert err_a is None
+    assert res_a is not None
+    assert len(res_a["match_s_runs"]) == 2
+    assert res_b is None
+    assert err_b is not None
+    assert "no answer to pass 2" in err_b
+    assert log.read_text().split() == ["a", "broken", "a", "broken", "a", "broken"]
