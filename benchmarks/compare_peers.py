@@ -49,6 +49,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent / "peers"))
+import common
 import fmm_network
 import scoring
 
@@ -351,7 +352,7 @@ class Job:
 
     def wants_pass(self, runs: list[float]) -> bool:
         """Whether the runner's rule asks for another pass after ``runs``."""
-        return len(runs) < self.repeats or (sum(runs) < self.min_time_s and len(runs) < _MAX_PASSES)
+        return common.wants_pass(runs, self.repeats, self.min_time_s)
 
     def start(self, control: tuple[int, int] | None = None) -> subprocess.Popen[bytes]:
         """Write the job file and start the runner (with the two pipes of ``control``)."""
@@ -392,8 +393,6 @@ class Job:
 
 #: What running a job gives: (result, error, wall seconds of the process).
 JobOutcome = tuple[dict[str, Any] | None, str | None, float]
-#: The runners' cap on passes (``benchmarks/peers/common.py``).
-_MAX_PASSES = 1000
 
 
 def run_job(job: Job, timeout_s: float) -> JobOutcome:

@@ -170,7 +170,7 @@ def run_peer(
     else:
         repeats = max(1, int(job.get("repeats", 1)))
         min_time_s = float(job.get("min_time_s", 0.0))
-        while len(runs) < repeats or (sum(runs) < min_time_s and len(runs) < _MAX_PASSES):
+        while wants_pass(runs, repeats, min_time_s):
             one_pass()
     match_s = statistics.median(runs)
     out = {
@@ -187,6 +187,11 @@ def run_peer(
     }
     Path(job["out"]).write_text(json.dumps(out))
     return 0
+
+
+def wants_pass(runs: list[float], repeats: int, min_time_s: float) -> bool:
+    """Whether a job with these passes so far needs another: ``repeats``, then ``min_time_s``."""
+    return len(runs) < repeats or (sum(runs) < min_time_s and len(runs) < _MAX_PASSES)
 
 
 def serve_passes(control: list[int], one_pass: Callable[[], tuple[float, float]]) -> None:
