@@ -168,7 +168,7 @@ def match(
     )
     _check_deadline(deadline, trace, "assembly")
     segments, points = odometer_ends(
-        net, assembled.segments, assembled.points, trace.odometer_m, config, fixes.radius_m
+        net, assembled.segments, assembled.points, trace.odometer_m, config, fixes.radius_m, (x, y)
     )
     matched_length = float(sum(s.length_m for s in segments))
     span, complete, odometer = measured_span(

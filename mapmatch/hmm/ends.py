@@ -15,6 +15,7 @@ close applies it to its record exactly as :func:`mapmatch.match` does to its own
 from __future__ import annotations
 
 import dataclasses
+from itertools import pairwise
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -145,6 +146,122 @@ def moved_ends(edge, lo, hi, along, odometer, reach, edge_len):  # type: ignore[
     return shift, grow
 
 
+def _joined(segments: list[Segment]) -> tuple[IntArray, IntArray, FloatArray, FloatArray, IntArray]:
+    """Each segment's ``(index, first, last)``, and their edges and offsets end to end, bounded."""
+    seg = np.array([(s.index, s.first, s.last) for s in segments], dtype=np.int64)
+    if len(segments) == 1:  # a match's usual one: its own arrays (the kernel copies)
+        only = segments[0]
+        bounds = np.array([0, len(only.edge)], dtype=np.int64)
+        return seg, only.edge, only.start_offset_m, only.end_offset_m, bounds
+    bounds = np.zeros(len(segments) + 1, dtype=np.int64)
+    np.cumsum([len(s.edge) for s in segments], out=bounds[1:])
+    edge = np.concatenate([s.edge for s in segments])
+    lo = np.concatenate([s.start_offset_m for s in segments])
+    hi = np.concatenate([s.end_offset_m for s in segments])
+    return seg, edge, lo, hi, bounds
+
+
+@njit(cache=True, nogil=True)
+def _ends_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    seg, edge, seg_lo, seg_hi, bounds, points, fix_x, fix_y, odometer, radius, reach, geometry
+):  # fmt: skip
+    """
+    :func:`odometer_ends` up to the moved fixes' degrees: every segment's :func:`moved_ends`.
+
+    ``seg`` holds each segment's ``(index, first, last)``, ``bounds`` where its stretches
+    start in ``edge``, ``seg_lo`` and ``seg_hi``; ``points`` is ``(matched, interpolated,
+    segment, edge, offset)`` of the fixes, ``fix_x``/``fix_y`` their projected positions,
+    ``radius`` their search radii (empty: no limit), ``geometry`` the network's
+    ``kernel_geometry``. Returns whether each segment moved, the segments' new start and end
+    offsets (copies), the fixes' offsets (a copy), whether any fix moved, the fixes that
+    moved onto the new ends with their new positions and distances, and the fixes lost (a
+    move beyond their radius, and the path no longer through their old place).
+    """
+    matched, interpolated, segment, fix_edge, fix_offset = points
+    n = len(fix_offset)
+    lo, hi = seg_lo.copy(), seg_hi.copy()
+    offset = fix_offset.copy()
+    moved = np.zeros(n, dtype=np.bool_)
+    # where the new path starts on each fix's edge, and ends (only the end edges have bounds)
+    path_lo = np.full(n, -np.inf)
+    path_hi = np.full(n, np.inf)
+    changed = np.zeros(len(seg), dtype=np.bool_)
+    chosen = np.empty(n, dtype=np.int64)
+    for s in range(len(seg)):
+        index, first, last = seg[s, 0], seg[s, 1], seg[s, 2]
+        a, b = bounds[s], bounds[s + 1]
+        e = edge[a:b]
+        m = 0
+        for k in range(first, last + 1):
+            if matched[k] and not interpolated[k] and segment[k] == index:
+                chosen[m] = k
+                m += 1
+        if m < MIN_READINGS or chosen[0] != first or chosen[m - 1] != last:
+            continue
+        model = chosen[:m].copy()
+        along = _along(e, lo[a:b], hi[a:b], fix_edge[model], offset[model])
+        shift, grow = moved_ends(e, lo[a:b], hi[a:b], along, odometer[model], reach, geometry[0])
+        if shift == 0.0 and grow == 0.0:
+            continue
+        changed[s] = True
+        length = 0.0  # as Segment.length_m sums: in order
+        for i in range(a, b):
+            length += hi[i] - lo[i]
+        c = 0
+        for k in range(first, last + 1):
+            if matched[k] and segment[k] == index:
+                chosen[c] = k
+                c += 1
+        every = chosen[:c]
+        places = _along(e, lo[a:b], hi[a:b], fix_edge[every], offset[every])
+        lo[a] += shift
+        hi[b - 1] += grow
+        for j in range(c):
+            k = every[j]
+            if fix_edge[k] == e[0]:
+                path_lo[k] = lo[a]
+            if fix_edge[k] == e[-1]:
+                path_hi[k] = hi[b - 1]
+        if shift:  # the fixes at the old start, and any the new start passed
+            for j in range(c):
+                k = every[j]
+                if (places[j] == places[0] or places[j] < shift) and fix_edge[k] == e[0]:
+                    offset[k] = lo[a]
+                    moved[k] = True
+        if grow:  # the fixes at the old end, and any the new end fell short of
+            for j in range(c):
+                k = every[j]
+                if (places[j] == places[c - 1] or places[j] > length + grow) and fix_edge[k] == e[
+                    -1
+                ]:
+                    offset[k] = hi[b - 1]
+                    moved[k] = True
+    at = np.flatnonzero(moved)
+    # the kernel itself: these edges and offsets are the path's own, nothing to check
+    x, y = points_on_edges(fix_edge[at], offset[at], *geometry)
+    go = np.empty(len(at), dtype=np.int64)
+    lost = np.empty(len(at), dtype=np.int64)
+    go_m = np.empty(len(at))
+    n_go = n_lost = 0
+    for j in range(len(at)):
+        k = at[j]
+        moved_m = np.hypot(x[j] - fix_x[k], y[j] - fix_y[k])
+        if len(radius) and moved_m > radius[k]:  # too far: stays if the path still has it
+            old = fix_offset[k]
+            if path_lo[k] <= old <= path_hi[k]:
+                offset[k] = old
+            else:
+                lost[n_lost] = k
+                n_lost += 1
+            continue
+        x[n_go], y[n_go], go[n_go], go_m[n_go] = x[j], y[j], k, moved_m
+        n_go += 1
+    return (
+        changed, lo, hi, offset, len(at) > 0,
+        (go[:n_go], x[:n_go], y[:n_go], go_m[:n_go]), lost[:n_lost],
+    )  # fmt: skip
+
+
 def odometer_ends(
     net: RoadNetwork,
     segments: list[Segment],
@@ -152,6 +269,7 @@ def odometer_ends(
     odometer_m: FloatArray | None,
     config: MatchConfig,
     radius_m: FloatArray | None = None,
+    fix_xy: tuple[FloatArray, FloatArray] | None = None,
 ) -> tuple[list[Segment], MatchedPoints]:
     """
     The segments with their ends where the odometer puts them, and the points with them.
@@ -166,71 +284,41 @@ def odometer_ends(
     With ``radius_m`` (every fix's search radius), no fix moves farther from itself than its
     radius: one that would keeps its place where the path still runs through it, and is
     otherwise left unmatched, an outlier, as assembly leaves a fix the path does not explain.
+    ``fix_xy`` are the fixes' projected positions when already known (``net.project`` of
+    the points' ``raw_lon`` and ``raw_lat``).
     """
     if odometer_m is None or config.odometer_end_sigmas <= 0 or not segments:
         return segments, points
-    edge_len = net.kernel_geometry[0]
-    model = points.matched & ~points.interpolated
-    offset = points.offset_m.copy()
-    moved = np.zeros(len(offset), dtype=bool)
-    # where the new path starts on each fix's edge, and ends (only the end edges have bounds)
-    path_lo = np.full(len(offset), -np.inf)
-    path_hi = np.full(len(offset), np.inf)
-    out = []
-    for seg in segments:
-        lo, hi = seg.start_offset_m.copy(), seg.end_offset_m.copy()
-        span = np.arange(seg.first, seg.last + 1)
-        fixes = span[model[span] & (points.segment[span] == seg.index)]
-        if len(fixes) < MIN_READINGS or fixes[0] != seg.first or fixes[-1] != seg.last:
-            out.append(seg)
-            continue
-        along = _along(seg.edge, lo, hi, points.edge[fixes], offset[fixes])
-        reach = (float(config.sigma_m), float(config.odometer_end_sigmas))
-        shift, grow = moved_ends(
-            seg.edge, lo, hi, along, np.ascontiguousarray(odometer_m[fixes]), reach, edge_len
+    seg, edge, lo, hi, bounds = _joined(segments)
+    fix_x, fix_y = net.project(points.raw_lon, points.raw_lat) if fix_xy is None else fix_xy
+    p = points
+    changed, lo, hi, offset, any_moved, went, lost = _ends_kernel(
+        seg, edge, lo, hi, bounds, (p.matched, p.interpolated, p.segment, p.edge, p.offset_m),
+        fix_x, fix_y, np.ascontiguousarray(odometer_m, dtype=np.float64),
+        _NO_RADIUS if radius_m is None else radius_m,
+        (float(config.sigma_m), float(config.odometer_end_sigmas)), net.kernel_geometry,
+    )  # fmt: skip
+    out = [
+        Segment(s.index, s.first, s.last, s.edge, lo[a:b], hi[a:b], net=net) if change else s
+        for s, change, (a, b) in zip(
+            segments, changed.tolist(), pairwise(bounds.tolist()), strict=True
         )
-        if shift == 0.0 and grow == 0.0:
-            out.append(seg)
-            continue
-        lo[0] += shift
-        hi[-1] += grow
-        every = span[points.matched[span] & (points.segment[span] == seg.index)]
-        places = _along(seg.edge, seg.start_offset_m, seg.end_offset_m, points.edge[every],
-                        offset[every])  # fmt: skip
-        path_lo[every[points.edge[every] == seg.edge[0]]] = lo[0]
-        path_hi[every[points.edge[every] == seg.edge[-1]]] = hi[-1]
-        if shift:  # the fixes at the old start, and any the new start passed
-            head = every[(places == places[0]) | (places < shift)]
-            head = head[points.edge[head] == seg.edge[0]]
-            offset[head] = lo[0]
-            moved[head] = True
-        if grow:  # the fixes at the old end, and any the new end fell short of
-            tail = every[(places == places[-1]) | (places > seg.length_m + grow)]
-            tail = tail[points.edge[tail] == seg.edge[-1]]
-            offset[tail] = hi[-1]
-            moved[tail] = True
-        out.append(Segment(seg.index, seg.first, seg.last, seg.edge, lo, hi, net=net))
-    if not moved.any():
+    ]
+    if not any_moved:
         return out, points
-    at = np.flatnonzero(moved)
-    # the kernel itself: these edges and offsets are the path's own, nothing to check
-    x, y = points_on_edges(points.edge[at], offset[at], *net.kernel_geometry)
-    fx, fy = net.project(points.raw_lon[at], points.raw_lat[at])
-    moved_m = np.hypot(x - fx, y - fy)
-    far = np.zeros(len(at), dtype=bool) if radius_m is None else moved_m > radius_m[at]
-    old = points.offset_m[at]
-    kept = far & (old >= path_lo[at]) & (old <= path_hi[at])
-    offset[at[kept]] = old[kept]  # the path still runs through its old place: it stays there
-    go = ~far
+    go, x, y, moved_m = went
     lon, lat = points.lon.copy(), points.lat.copy()
-    lon[at[go]], lat[at[go]] = net.unproject(x[go], y[go])
+    lon[go], lat[go] = net.unproject(x, y)
     distance = points.distance_m.copy()
-    distance[at[go]] = moved_m[go]
+    distance[go] = moved_m
     placed = dataclasses.replace(points, offset_m=offset, lon=lon, lat=lat, distance_m=distance)
-    lost = at[far & ~kept]
     if not len(lost):
         return out, placed
     return _unmatched(out, placed, lost, net)
+
+
+#: ``radius_m`` of :func:`_ends_kernel` when no fix has one.
+_NO_RADIUS = np.empty(0)
 
 
 def _unmatched(
