@@ -22,6 +22,7 @@ import os
 import shutil
 import tempfile
 import threading
+import weakref
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -223,28 +224,22 @@ class TableKeeper:
 
     def __init__(self) -> None:
         self._reset()
+        _KEEPERS.add(self)
 
     def _reset(self) -> None:
-        self._pid = os.getpid()
         self._lock = threading.Lock()
         self._job: threading.Thread | None = None
         self.note = "not looked for yet"
         #: Whether the network's table is the one memory-mapped from its cache entry.
         self.stored = False
 
-    def _here(self) -> None:
-        if self._pid != os.getpid():  # a forked child: the parent's thread and lock are not here
-            self._reset()
-
     @property
     def started(self) -> bool:
         """Whether the table was looked for (or is being) in this process."""
-        self._here()
         return self._job is not None
 
     def request(self, net: RoadNetwork) -> None:
         """Look for the table (and build it when it fits the budget) in the background."""
-        self._here()
         with self._lock:
             if self._job is not None:
                 return
@@ -267,6 +262,19 @@ class TableKeeper:
         except Exception as exc:  # a background thread must not die unheard
             self.note = f"failed: {exc}"
             _log.warning("route table for %s not built: %s", net.network_id, exc)
+
+
+#: Every keeper of this process: a forked child starts each afresh (the parent's thread and
+#: lock are not there), checked once at the fork rather than on every match.
+_KEEPERS: weakref.WeakSet[TableKeeper] = weakref.WeakSet()
+
+
+def _forked() -> None:
+    for keeper in list(_KEEPERS):
+        keeper._reset()
+
+
+os.register_at_fork(after_in_child=_forked)
 
 
 def _provide(net: RoadNetwork, keeper: TableKeeper) -> str:

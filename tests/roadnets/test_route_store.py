@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import os
 import pickle
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -100,3 +101,22 @@ def test_a_corrupt_stored_table_is_removed_and_built_again(
     assert rebuilt is not None
     assert again.route_table_note.startswith("built and stored in the cache entry: ")
     assert np.array_equal(rebuilt.records(a, b), expected)
+
+
+def test_a_forked_child_looks_for_the_table_afresh() -> None:
+    net = roadnets.load(OAKLAND, use_cache=False)
+    assert net.sparse_route_table() is not None
+    assert net.route_table_requested
+    read, write = os.pipe()
+    child = os.fork()
+    if child == 0:  # the parent's job thread and lock are not in the child
+        report = f"{net.route_table_requested}|{net.route_table_note}"
+        os.write(write, report.encode())
+        os._exit(0)
+    os.close(write)
+    _, status = os.waitpid(child, 0)
+    with os.fdopen(read) as answer:
+        report = answer.read()
+    assert os.waitstatus_to_exitcode(status) == 0
+    assert report == "False|not looked for yet"
+    assert net.route_table_requested  # the parent's own is untouched
