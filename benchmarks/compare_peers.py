@@ -383,11 +383,14 @@ class Job:
                 pass_fds=control or (),
             )
 
+    def log_tail(self) -> str:
+        """The last lines of the runner's log, joined: what a failure says."""
+        return " | ".join(self.log_path.read_text(errors="replace").strip().splitlines()[-3:])
+
     def outcome(self, returncode: int | None, wall: float) -> JobOutcome:
         """The result file the runner wrote, or what went wrong (the log's last lines)."""
         if returncode != 0 or not self.out_path.exists():
-            tail = self.log_path.read_text(errors="replace").strip().splitlines()[-3:]
-            return None, f"exit {returncode}: {' | '.join(tail)}", wall
+            return None, f"exit {returncode}: {self.log_tail()}", wall
         return json.loads(self.out_path.read_text()), None, wall
 
 
@@ -487,8 +490,7 @@ def run_jobs_in_turns(jobs: list[Job], timeout_s: float) -> list[JobOutcome]:
         turn.answers.close()
         wall = time.perf_counter() - turn.started
         if turn.error is not None and returncode != 0:
-            tail = turn.job.log_path.read_text(errors="replace").strip().splitlines()[-3:]
-            outcomes.append((None, f"{turn.error}: {' | '.join(tail)}", wall))
+            outcomes.append((None, f"{turn.error}: {turn.job.log_tail()}", wall))
         elif turn.error is not None:
             outcomes.append((None, turn.error, wall))
         else:
