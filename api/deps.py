@@ -14,6 +14,7 @@ a 404 tell a caller without a token which routes exist.
 from __future__ import annotations
 
 import secrets
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Annotated, TypeVar
 
 from fastapi import Depends, Request
@@ -34,6 +35,8 @@ T = TypeVar("T")
 
 __all__ = [
     "BearerToken",
+    "MatchContext",
+    "MatchContextDep",
     "MatchQueryDep",
     "MetricsDep",
     "NetworksDep",
@@ -44,6 +47,7 @@ __all__ = [
     "get_networks",
     "get_service",
     "get_settings",
+    "match_context",
     "match_query",
     "match_query_parameters",
     "on_the_loop",
@@ -164,7 +168,7 @@ class BearerToken:
             raise UnauthorizedError(problem)
 
 
-async def single_valued_query(request: Request) -> None:
+def single_valued_query(request: Request) -> None:
     """
     Refuse a query parameter given more than once (only list-valued ones may repeat).
 
@@ -222,3 +226,41 @@ def match_query_parameters() -> list[dict[str, object]]:
 
 
 MatchQueryDep = Annotated[MatchQuery, Depends(on_the_loop(match_query))]
+
+
+@dataclass(frozen=True, slots=True)
+class MatchContext:
+    """
+    What ``POST /v1/match`` reads per request, solved as one dependency.
+
+    FastAPI solves each dependency of a request on the event loop (about 10 us apiece under
+    load); the match route's six, one by one, were a quarter of the framework's time per
+    request. ``query`` is :func:`match_query`'s, the rest the app's own objects.
+    """
+
+    query: MatchQuery
+    settings: Settings
+    service: MatchService
+    metrics: ServiceMetrics
+
+
+def match_context(request: Request) -> MatchContext:
+    """
+    The match route's query and the app's objects, in the order it checks them.
+
+    Raises
+    ------
+    RepeatedParameterError
+        A query parameter given twice (:func:`single_valued_query`).
+    RequestValidationError
+        A bad query parameter (:func:`match_query`).
+    NotReadyError, RoadNetworkError
+        The networks are still loading or failed to (:func:`ready_networks`).
+    """
+    single_valued_query(request)
+    query = match_query(request)
+    ready_networks(request)
+    return MatchContext(query, get_settings(request), get_service(request), get_metrics(request))
+
+
+MatchContextDep = Annotated[MatchContext, Depends(on_the_loop(match_context))]

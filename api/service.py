@@ -30,13 +30,14 @@ import math
 import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, Final, TypeVar
 
 from pydantic import ValidationError
 from pydantic_core import from_json
 
 import mapmatch
+from api.compression import gzipped
 from api.costs import check_budget, match_cost
 from api.errors import (
     InvalidJSONError,
@@ -112,7 +113,12 @@ def match_within(
 
 @dataclass(frozen=True, slots=True)
 class MatchOutcome:
-    """A finished match: the GeoJSON document as bytes, and figures for logs and metrics."""
+    """
+    A finished match: the GeoJSON document as bytes, and figures for logs and metrics.
+
+    ``content_encoding`` is ``"gzip"`` when ``content`` is the document gzipped
+    (:meth:`MatchService.submit` with ``gzip_min_bytes``), ``None`` when it is the document.
+    """
 
     content: bytes
     trace_id: str
@@ -121,6 +127,7 @@ class MatchOutcome:
     matched_points: int
     breaks: int
     seconds: float
+    content_encoding: str | None = None
 
     @classmethod
     def of(cls, result: mapmatch.MatchResult, content: bytes, started: float) -> MatchOutcome:
@@ -134,6 +141,12 @@ class MatchOutcome:
             breaks=len(result.breaks),
             seconds=time.perf_counter() - started,
         )
+
+    def gzipped(self, min_bytes: int) -> MatchOutcome:
+        """The outcome with its content gzipped if it is at least ``min_bytes`` long (> 0)."""
+        if min_bytes <= 0 or len(self.content) < min_bytes or self.content_encoding:
+            return self
+        return replace(self, content=gzipped(self.content), content_encoding="gzip")
 
 
 #: Request bodies up to this size (about 350 JSON points with every field, 1,500 CSV rows:
@@ -281,12 +294,20 @@ class MatchService:
             short_threads=short_lane_threads(settings.match_threads, settings.worker_processes),
         )
 
-    async def submit(self, body: bytes, fmt: str, query: MatchQuery) -> MatchOutcome:
-        """:meth:`run` in a match thread, under the time budget."""
+    async def submit(
+        self, body: bytes, fmt: str, query: MatchQuery, *, gzip_min_bytes: int = 0
+    ) -> MatchOutcome:
+        """
+        :meth:`run` in a match thread, under the time budget.
+
+        With ``gzip_min_bytes`` (> 0) an answer at least that long is gzipped in the match
+        thread too (:meth:`MatchOutcome.gzipped`), not on the event loop.
+        """
         self.networks.get(query.network)  # answer not_ready / unknown_network before queueing
         deadline = time.monotonic() + self.runner.budget_s
         return await self.runner.run(
-            lambda: self.run(body, fmt, query, deadline=deadline), size=len(body)
+            lambda: self.run(body, fmt, query, deadline=deadline).gzipped(gzip_min_bytes),
+            size=len(body),
         )
 
     def run(

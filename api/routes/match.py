@@ -4,18 +4,11 @@ from __future__ import annotations
 
 from typing import Any, Final
 
-from fastapi import APIRouter, Depends, Request
+from fastapi import APIRouter, Request
 from fastapi.responses import JSONResponse
 
-from api.deps import (
-    MatchQueryDep,
-    MetricsDep,
-    ReadyNetworksDep,
-    ServiceDep,
-    SettingsDep,
-    match_query_parameters,
-    single_valued_query,
-)
+from api.compression import accepts_gzip
+from api.deps import MatchContextDep, match_query_parameters
 from api.intake import MEDIA_TYPES, BodyLimits, body_format, read_limited_body
 from api.middleware import SCOPE_KEY
 from api.routes.common import error_responses
@@ -70,7 +63,6 @@ router = APIRouter(tags=["match"])
         "segment, then one per point. Content types read: " + ", ".join(MEDIA_TYPES) + "."
     ),
     response_class=GeoJSONResponse,
-    dependencies=[Depends(single_valued_query)],
     responses={
         200: {
             "model": MatchResponse,
@@ -81,18 +73,15 @@ router = APIRouter(tags=["match"])
     },
     openapi_extra={"requestBody": MATCH_REQUEST_BODY, "parameters": match_query_parameters()},
 )
-async def match_trace(
-    request: Request,
-    query: MatchQueryDep,
-    settings: SettingsDep,
-    service: ServiceDep,
-    metrics: MetricsDep,
-    _networks: ReadyNetworksDep,
-) -> GeoJSONResponse:
-    """Match the body's trace and answer its GeoJSON."""
+async def match_trace(request: Request, context: MatchContextDep) -> GeoJSONResponse:
+    """Match the body's trace and answer its GeoJSON (gzipped in the match thread if asked)."""
+    settings, metrics = context.settings, context.metrics
     fmt = body_format(request.headers.get("content-type"))
     body = await read_limited_body(request, fmt, BodyLimits.of(settings))
-    outcome = await service.submit(body, fmt, query)
+    gzip_min_bytes = (
+        settings.gzip_min_bytes if accepts_gzip(request.headers.get("accept-encoding")) else 0
+    )
+    outcome = await context.service.submit(body, fmt, context.query, gzip_min_bytes=gzip_min_bytes)
     request.scope[SCOPE_KEY].update(
         points=outcome.points, network=outcome.network, trace_id=outcome.trace_id
     )
@@ -100,4 +89,9 @@ async def match_trace(
     metrics.matched_points.inc(outcome.matched_points)
     metrics.breaks.inc(outcome.breaks)
     metrics.match_seconds.observe(outcome.seconds)
-    return GeoJSONResponse(outcome.content)
+    if outcome.content_encoding is None:
+        return GeoJSONResponse(outcome.content)
+    return GeoJSONResponse(
+        outcome.content,
+        headers={"content-encoding": outcome.content_encoding, "vary": "Accept-Encoding"},
+    )

@@ -10,6 +10,7 @@ import httpx
 import pytest
 
 from api.polyline import decode, encode
+from api.service import MatchOutcome
 from api.settings import Settings
 
 if TYPE_CHECKING:
@@ -25,6 +26,7 @@ def test_answers_are_gzipped_when_asked(client: httpx.Client, trip, bodies) -> N
         timeout=60,
     )
     assert raw.headers["content-encoding"] == "gzip"
+    assert raw.headers["vary"] == "Accept-Encoding"
     plain = client.post("/v1/match", json=body, headers={"Accept-Encoding": "identity"})
     assert "content-encoding" not in plain.headers
     assert raw.json()["features"] == plain.json()["features"]  # httpx inflated it
@@ -35,6 +37,18 @@ def test_answers_are_gzipped_when_asked(client: httpx.Client, trip, bodies) -> N
     ) as stream:
         wire = b"".join(stream.iter_raw())
     assert json.loads(gzip.decompress(wire))["features"] == plain.json()["features"]
+
+
+def test_an_outcome_is_gzipped_from_its_threshold_on_and_once() -> None:
+    document = b'{"type":"FeatureCollection","features":[]}' * 40
+    outcome = MatchOutcome(document, "t", "n", 2, 2, 0, 0.001)
+    packed = outcome.gzipped(len(document))
+    assert packed.content_encoding == "gzip"
+    assert gzip.decompress(packed.content) == document
+    assert packed.gzipped(1) is packed  # never twice
+    assert outcome.gzipped(len(document) + 1) is outcome  # shorter than the threshold
+    assert outcome.gzipped(0) is outcome  # 0: never
+    assert outcome.gzipped(-1) is outcome
 
 
 def test_cors_preflight_and_origin(start_thread_server, cache_dir: Path, token: str) -> None:
