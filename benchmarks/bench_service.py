@@ -80,6 +80,7 @@ class RunResult:
     pss_before_mb: float
     pss_after_mb: float
     server_cpu_s: float = float("nan")
+    loop_cpu_s: float = float("nan")  # the workers' main threads: their event loops
 
     def row(self) -> str:
         lat = np.array(self.latencies_s) * 1000.0
@@ -185,15 +186,27 @@ def memory_mb(pid: int) -> tuple[float, float]:
     return rss / 1024.0, pss / 1024.0
 
 
-def cpu_seconds(pid: int) -> float:
-    """User + system CPU seconds of a process tree so far, every thread (Linux /proc)."""
-    ticks = 0
+def _ticks(stat: Path) -> int:
+    """User + system clock ticks of a ``/proc/.../stat`` file."""
+    # the fields after the command's closing parenthesis: utime and stime are 12 and 13
+    fields = stat.read_text().rsplit(")", 1)[1].split()
+    return int(fields[11]) + int(fields[12])
+
+
+def cpu_seconds(pid: int) -> tuple[float, float]:
+    """
+    CPU seconds of a process tree so far: every thread, and the processes' main threads.
+
+    A worker's main thread runs its event loop (HTTP, the framework, the answer sent), the
+    others its matches; the server's supervisor, if any, adds its main thread's little.
+    """
+    every = main = 0
     for p in _tree(pid):
         with contextlib.suppress(OSError):
-            # the fields after the command's closing parenthesis: utime and stime are 12 and 13
-            fields = Path(f"/proc/{p}/stat").read_text().rsplit(")", 1)[1].split()
-            ticks += int(fields[11]) + int(fields[12])
-    return ticks / os.sysconf("SC_CLK_TCK")
+            every += _ticks(Path(f"/proc/{p}/stat"))
+            main += _ticks(Path(f"/proc/{p}/task/{p}/stat"))
+    per_second = os.sysconf("SC_CLK_TCK")
+    return every / per_second, main / per_second
 
 
 @contextlib.contextmanager
@@ -431,13 +444,13 @@ def run(
     with server(workers, cache_dir, log) as (url, process):
         asyncio.run(loader(url, bodies, clients=args.clients, duration_s=args.warmup_s))
         rss0, pss0 = memory_mb(process.pid)
-        cpu0 = cpu_seconds(process.pid)
+        cpu0, loop0 = cpu_seconds(process.pid)
         started = time.perf_counter()
         count, latencies, errors = asyncio.run(
             loader(url, bodies, clients=args.clients, duration_s=args.duration_s)
         )
         elapsed = time.perf_counter() - started
-        server_cpu = cpu_seconds(process.pid) - cpu0
+        cpu1, loop1 = cpu_seconds(process.pid)
         rss1, pss1 = memory_mb(process.pid)
         if process.poll() is not None:
             msg = f"the server died under load:\n{log.read_text()[-3000:]}"
@@ -474,7 +487,8 @@ def run(
         rss1,
         pss0,
         pss1,
-        server_cpu,
+        cpu1 - cpu0,
+        loop1 - loop0,
     )
 
 
@@ -674,23 +688,29 @@ def main(argv: list[str] | None = None) -> int:
             f"GeoJSON) on the same bodies, no HTTP, no client ({args.duration_s:.0f} s):\n"
         )
         print(
-            "The last three columns count requests per CPU second of the server's processes "
+            "The next three columns count requests per CPU second of the server's processes "
             "(HTTP) and of the in-process ones: the cost of the HTTP path itself, whatever "
-            "share of the cores the clients take.\n"
+            "share of the cores the clients take. The last three split the server's CPU per "
+            "request into its event loops' (HTTP, framework, answer sent) and its match "
+            "threads', against the in-process handler's.\n"
         )
         print(
             "| workers | client | HTTP req/s | in-process req/s | HTTP / in-process | "
-            "HTTP req per server CPU-s | in-process req per CPU-s | HTTP / in-process per CPU |"
+            "HTTP req per server CPU-s | in-process req per CPU-s | HTTP / in-process per CPU "
+            "| event loop ms/req | match threads ms/req | in-process ms/req |"
         )
-        print("|---|---|---|---|---|---|---|---|")
+        print("|---|---|---|---|---|---|---|---|---|---|---|")
         for result in results:
             rate = result.requests / result.duration_s
             base, base_cpu = local[result.workers]
             per_cpu = result.requests / result.server_cpu_s
+            loop_ms = 1000.0 * result.loop_cpu_s / result.requests
+            match_ms = 1000.0 * (result.server_cpu_s - result.loop_cpu_s) / result.requests
             print(
                 f"| {result.workers} | {result.client} | {rate:.1f} | {base:.1f} | "
                 f"{100 * rate / base:.0f} % | {per_cpu:.1f} | {base_cpu:.1f} | "
-                f"{100 * per_cpu / base_cpu:.0f} % |"
+                f"{100 * per_cpu / base_cpu:.0f} % | {loop_ms:.2f} | {match_ms:.2f} | "
+                f"{1000.0 / base_cpu:.2f} |"
             )
     if ABUSE:
         print(f"\nThe same load with 4 hostile clients beside it ({args.duration_s:.0f} s):\n")
