@@ -29,7 +29,9 @@ on the same bodies in a loop for ``--duration-s``, with no HTTP and no client, a
 HTTP rows' requests/s as a share of that (issue 15: the HTTP path at >= 70 % of in-process),
 and the same per CPU second of the server's processes (all their threads, read from /proc
 before and after the load) against per CPU second of the in-process ones: the clients share
-the cores, so the first ratio also holds what they take, the second only what HTTP costs.
+the cores, so the first ratio also holds what they take, the second only what HTTP costs;
+then the server's CPU per request split into its workers' main threads (their event loops:
+HTTP, the framework, the answer sent) and their match threads, beside the in-process handler's.
 
 Bounded: loopback only, a fixed duration, a fixed number of clients.
 """
