@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import gzip
 import json
 from typing import TYPE_CHECKING
@@ -9,7 +10,9 @@ from typing import TYPE_CHECKING
 import httpx
 import pytest
 
+from api.app import create_app
 from api.polyline import decode, encode
+from api.schemas import MatchQuery
 from api.service import MatchOutcome
 from api.settings import Settings
 
@@ -49,6 +52,23 @@ def test_an_outcome_is_gzipped_from_its_threshold_on_and_once() -> None:
     assert outcome.gzipped(len(document) + 1) is outcome  # shorter than the threshold
     assert outcome.gzipped(0) is outcome  # 0: never
     assert outcome.gzipped(-1) is outcome
+
+
+def test_the_service_gzips_an_answer_in_its_match_thread(cache_dir: Path, trip, bodies) -> None:
+    service = create_app(Settings(cache_dir=str(cache_dir), access_log=False)).state.service
+    service.networks.load_all()
+    body = json.dumps({"points": bodies.points(trip.trace), "trace_id": "t"}).encode()
+    try:
+        plain = service.run(body, "json", MatchQuery())
+        packed = asyncio.run(service.submit(body, "json", MatchQuery(), gzip_min_bytes=100))
+        kept = asyncio.run(service.submit(body, "json", MatchQuery()))
+    finally:
+        service.runner.shutdown()
+    assert packed.content_encoding == "gzip"
+    document = json.loads(gzip.decompress(packed.content))
+    assert document["features"] == json.loads(plain.content)["features"]
+    assert kept.content_encoding is None
+    assert json.loads(kept.content)["features"] == document["features"]
 
 
 def test_cors_preflight_and_origin(start_thread_server, cache_dir: Path, token: str) -> None:
