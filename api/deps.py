@@ -37,7 +37,6 @@ __all__ = [
     "BearerToken",
     "MatchContext",
     "MatchContextDep",
-    "MatchQueryDep",
     "MetricsDep",
     "NetworksDep",
     "ReadyNetworksDep",
@@ -223,9 +222,6 @@ def match_query_parameters() -> list[dict[str, object]]:
         }
         for name, prop in MatchQuery.model_json_schema()["properties"].items()
     ]
-
-
-MatchQueryDep = Annotated[MatchQuery, Depends(on_the_loop(match_query))]
 
 
 @dataclass(frozen=True, slots=True)

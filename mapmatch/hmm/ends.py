@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from mapmatch._timing import SegmentPaths
 from mapmatch.hmm.assemble import fixes_on_piece
 from mapmatch.hmm.observations import sigma_of_distances
 from mapmatch.result import MatchedPoints, Segment
@@ -146,30 +147,15 @@ def moved_ends(edge, lo, hi, along, odometer, reach, edge_len):  # type: ignore[
     return shift, grow
 
 
-def _joined(segments: list[Segment]) -> tuple[IntArray, IntArray, FloatArray, FloatArray, IntArray]:
-    """Each segment's ``(index, first, last)``, and their edges and offsets end to end, bounded."""
-    seg = np.array([(s.index, s.first, s.last) for s in segments], dtype=np.int64)
-    if len(segments) == 1:  # a match's usual one: its own arrays (the kernel copies)
-        only = segments[0]
-        bounds = np.array([0, len(only.edge)], dtype=np.int64)
-        return seg, only.edge, only.start_offset_m, only.end_offset_m, bounds
-    bounds = np.zeros(len(segments) + 1, dtype=np.int64)
-    np.cumsum([len(s.edge) for s in segments], out=bounds[1:])
-    edge = np.concatenate([s.edge for s in segments])
-    lo = np.concatenate([s.start_offset_m for s in segments])
-    hi = np.concatenate([s.end_offset_m for s in segments])
-    return seg, edge, lo, hi, bounds
-
-
 @njit(cache=True, nogil=True)
 def _ends_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    seg, edge, seg_lo, seg_hi, bounds, points, fix_x, fix_y, odometer, radius, reach, geometry
+    paths, points, fix_x, fix_y, odometer, radius, reach, geometry
 ):  # fmt: skip
     """
     :func:`odometer_ends` up to the moved fixes' degrees: every segment's :func:`moved_ends`.
 
-    ``seg`` holds each segment's ``(index, first, last)``, ``bounds`` where its stretches
-    start in ``edge``, ``seg_lo`` and ``seg_hi``; ``points`` is ``(matched, interpolated,
+    ``paths`` is the segments' :class:`~mapmatch._timing.SegmentPaths` as ``(index, first,
+    last, bounds, edge, start offsets, end offsets)``; ``points`` is ``(matched, interpolated,
     segment, edge, offset)`` of the fixes, ``fix_x``/``fix_y`` their projected positions,
     ``radius`` their search radii (empty: no limit), ``geometry`` the network's
     ``kernel_geometry``. Returns whether each segment moved, the segments' new start and end
@@ -177,6 +163,7 @@ def _ends_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     moved onto the new ends with their new positions and distances, and the fixes lost (a
     move beyond their radius, and the path no longer through their old place).
     """
+    seg_index, seg_first, seg_last, bounds, edge, seg_lo, seg_hi = paths
     matched, interpolated, segment, fix_edge, fix_offset = points
     n = len(fix_offset)
     lo, hi = seg_lo.copy(), seg_hi.copy()
@@ -185,10 +172,10 @@ def _ends_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     # where the new path starts on each fix's edge, and ends (only the end edges have bounds)
     path_lo = np.full(n, -np.inf)
     path_hi = np.full(n, np.inf)
-    changed = np.zeros(len(seg), dtype=np.bool_)
+    changed = np.zeros(len(seg_index), dtype=np.bool_)
     chosen = np.empty(n, dtype=np.int64)
-    for s in range(len(seg)):
-        index, first, last = seg[s, 0], seg[s, 1], seg[s, 2]
+    for s in range(len(seg_index)):
+        index, first, last = seg_index[s], seg_first[s], seg_last[s]
         a, b = bounds[s], bounds[s + 1]
         e = edge[a:b]
         m = 0
@@ -289,11 +276,13 @@ def odometer_ends(
     """
     if odometer_m is None or config.odometer_end_sigmas <= 0 or not segments:
         return segments, points
-    seg, edge, lo, hi, bounds = _joined(segments)
+    paths = SegmentPaths.of(segments)
     fix_x, fix_y = net.project(points.raw_lon, points.raw_lat) if fix_xy is None else fix_xy
     p = points
     changed, lo, hi, offset, any_moved, went, lost = _ends_kernel(
-        seg, edge, lo, hi, bounds, (p.matched, p.interpolated, p.segment, p.edge, p.offset_m),
+        (paths.index, paths.first, paths.last, paths.bounds, paths.edge, paths.start_m,
+         paths.end_m),
+        (p.matched, p.interpolated, p.segment, p.edge, p.offset_m),
         fix_x, fix_y, np.ascontiguousarray(odometer_m, dtype=np.float64),
         _NO_RADIUS if radius_m is None else radius_m,
         (float(config.sigma_m), float(config.odometer_end_sigmas)), net.kernel_geometry,
@@ -301,7 +290,7 @@ def odometer_ends(
     out = [
         Segment(s.index, s.first, s.last, s.edge, lo[a:b], hi[a:b], net=net) if change else s
         for s, change, (a, b) in zip(
-            segments, changed.tolist(), pairwise(bounds.tolist()), strict=True
+            segments, changed.tolist(), pairwise(paths.bounds.tolist()), strict=True
         )
     ]
     if not any_moved:
