@@ -13,9 +13,12 @@ The text of a whole table is written by one compiled call (:func:`_write_rows`),
 small program made once per set of columns (literals, numbers, nested objects and arrays
 inlined, the arrays of items of each row too: :class:`Items`) and the columns' arrays, so
 no dict, no JSON encoder and no Python object is touched per value; several tables' rows
-one after another are one call as well (:func:`chained_ascii`: a document's features).
-Numbers come out as ``json.dumps`` writes them (``repr``); values that are not finite, and
-rows outside a column's ``valid`` mask, are ``null``.
+one after another are one call as well (:func:`chained_ascii`). Tables declared over the
+columns of one compiled call (:class:`Packed`: a document's features) are walked once;
+later calls run that walk's program on the packed arrays themselves, no table made
+(:func:`sourced_pieces`). Numbers come out as ``json.dumps`` writes them (``repr``); values
+that are not finite, and rows outside a column's ``valid`` mask, are ``null``; texts as it
+writes them too.
 
 Examples
 --------
@@ -36,7 +39,7 @@ import json
 import math
 from dataclasses import dataclass
 from itertools import accumulate, pairwise
-from typing import TYPE_CHECKING, Any, Literal, Protocol
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple, Protocol
 
 import numpy as np
 from numba import njit, types
@@ -44,24 +47,28 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Callable, Sequence
 
-    from mapmatch.types import BoolArray, FloatArray, IntArray
+    from mapmatch.types import BoolArray, ByteArray, FloatArray, IntArray
 
 __all__ = [
     "Bools",
+    "Choice",
     "Column",
     "Const",
     "Floats",
     "Ints",
     "Items",
     "Nested",
+    "Packed",
     "Strings",
     "Table",
     "Tuple",
+    "Utf8",
     "chained_ascii",
     "chained_pieces",
     "py_round",
+    "sourced_pieces",
 ]
 
 _NULL = "null"
@@ -154,7 +161,7 @@ _MAX_EXACT = 1e15
 _POW10 = 10.0 ** np.arange(23)
 _ROUNDING = {"none": 0, "numpy": 1, "python": 2}
 #: What a row of the text is made of: the codes of :func:`_write_rows`' program.
-_LIT, _FLOAT, _INT, _BOOL, _TEXT, _GROUP, _EACH, _NEXT = 0, 1, 2, 3, 4, 5, 6, 7
+_LIT, _FLOAT, _INT, _BOOL, _TEXT, _GROUP, _EACH, _NEXT, _CHOICE, _UTF8 = range(10)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -301,8 +308,73 @@ def _put_float(out, at, v, digits, rounding, pow10):  # type: ignore[no-untyped-
     return end
 
 
+#: At most this many bytes of JSON text per byte of UTF-8 (a control character: ``\\u001f``).
+_ESCAPED_PER_BYTE = 6
+#: The hexadecimal digits ``json.dumps`` escapes with (lower case).
+_HEX = np.frombuffer(b"0123456789abcdef", dtype=np.uint8)
+#: The two-character escapes ``json.dumps`` uses, by character (0 where it uses ``\\u``).
+_SHORT_ESCAPES = np.zeros(128, dtype=np.uint8)
+for _char, _escape in zip('"\\\n\r\t\b\f', '"\\nrtbf', strict=True):
+    _SHORT_ESCAPES[ord(_char)] = ord(_escape)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _put_u_escape(out, at, unit):  # type: ignore[no-untyped-def]  # pragma: no cover
+    r"""``\uXXXX`` of the UTF-16 code unit ``unit`` at ``out[at:]``; returns the end."""
+    out[at] = 92  # backslash
+    out[at + 1] = 117  # u
+    for j in range(4):
+        out[at + 5 - j] = _HEX[(unit >> (4 * j)) & 15]
+    return at + 6
+
+
 @njit(cache=True, nogil=True)
-def _output_size(rows, sep, ops, lit_at, floats_at, ints, ints_at, text_at, text_col):  # type: ignore[no-untyped-def]  # pragma: no cover
+def _put_escaped(out, at, text, start, stop):  # type: ignore[no-untyped-def]  # pragma: no cover
+    r"""
+    The UTF-8 ``text[start:stop]`` as ``json.dumps`` writes a string (ASCII, quoted); the end.
+
+    Printable ASCII but ``"`` and ``\`` as it is, those two and ``\n``, ``\r``, ``\t``,
+    ``\b``, ``\f`` with a backslash, every other character as ``\uXXXX`` (a surrogate pair
+    beyond U+FFFF). A sequence cut off by ``stop`` is written as U+FFFD.
+    """
+    out[at] = 34  # "
+    at += 1
+    i = start
+    while i < stop:
+        lead = np.int64(text[i])
+        if lead < 0x80:
+            size, point = 1, lead
+        elif lead < 0xE0:
+            size, point = 2, lead & 0x1F
+        elif lead < 0xF0:
+            size, point = 3, lead & 0x0F
+        else:
+            size, point = 4, lead & 0x07
+        if i + size > stop:
+            size, point = stop - i, np.int64(0xFFFD)
+        else:
+            for j in range(i + 1, i + size):
+                point = (point << 6) | (np.int64(text[j]) & 0x3F)
+        i += size
+        if 0x20 <= point < 0x7F and point != 34 and point != 92:
+            out[at] = point
+            at += 1
+        elif point < 0x80 and _SHORT_ESCAPES[point]:
+            out[at] = 92  # backslash
+            out[at + 1] = _SHORT_ESCAPES[point]
+            at += 2
+        elif point < 0x10000:
+            at = _put_u_escape(out, at, point)
+        else:
+            point -= 0x10000
+            at = _put_u_escape(out, at, 0xD800 | (point >> 10))
+            at = _put_u_escape(out, at, 0xDC00 | (point & 0x3FF))
+    out[at] = 34  # "
+    return at + 1
+
+
+@njit(cache=True, nogil=True)
+def _output_size(rows, sep, ops, lit_at, floats_at, ints, ints_at, text, text_at, text_col):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
     Bytes enough for the text of :func:`_write_rows`, after checking every column's length.
 
@@ -345,6 +417,28 @@ def _output_size(rows, sep, ops, lit_at, floats_at, ints, ints_at, text_at, text
         elif code == 4:
             length = text_col[a + 1] - text_col[a]
             size += text_at[text_col[a + 1]] - text_at[text_col[a]]
+        elif code == 8:
+            length = ints_at[a + 1] - ints_at[a]
+            widest = 0
+            for j in range(b, b + ops[k, 3]):
+                widest = max(widest, lit_at[j + 1] - lit_at[j])
+            for j in range(ints_at[a], ints_at[a + 1]):
+                if ints[j] < 0 or ints[j] >= ops[k, 3]:
+                    msg = "a choice's number is not one of its choices"
+                    raise ValueError(msg)
+            size += widest * extent
+        elif code == 9:
+            length = ints_at[a + 1] - ints_at[a]
+            if ints_at[b + 1] - ints_at[b] != length:
+                msg = "a text column's starts and stops differ in length"
+                raise ValueError(msg)
+            for j in range(length):
+                lo = ints[ints_at[a] + j]
+                hi = ints[ints_at[b] + j]
+                if lo < 0 or hi < lo or hi > len(text):
+                    msg = "a text's bytes are outside the text"
+                    raise ValueError(msg)
+                size += _ESCAPED_PER_BYTE * (hi - lo) + 4  # the quotes, or null
         else:  # ints, bools, a group's mask
             length = ints_at[a + 1] - ints_at[a]
             size += (21 if code == 2 else 5) * extent
@@ -381,7 +475,7 @@ def _write_rows(  # type: ignore[no-untyped-def]  # pragma: no cover
     top row)`` of each number left for ``repr`` (written as nothing; ``row`` of its level).
     """
     n_ops = ops.shape[0]
-    size = _output_size(rows, sep, ops, lit_at, floats_at, ints, ints_at, text_at, text_col)
+    size = _output_size(rows, sep, ops, lit_at, floats_at, ints, ints_at, text, text_at, text_col)
     n_floats = 0
     for k in range(n_ops):
         if ops[k, 0] == 1:
@@ -442,6 +536,16 @@ def _write_rows(  # type: ignore[no-untyped-def]  # pragma: no cover
             elif code == 4:
                 i = text_col[a] + row
                 at = _put_bytes(out, at, text, text_at[i], text_at[i + 1])
+            elif code == 8:
+                j = b + ints[ints_at[a] + row]
+                at = _put_bytes(out, at, lit, lit_at[j], lit_at[j + 1])
+            elif code == 9:
+                lo = ints[ints_at[a] + row]
+                hi = ints[ints_at[b] + row]
+                if lo == hi and ops[k, 3]:
+                    at = _put_null(out, at)
+                else:
+                    at = _put_escaped(out, at, text, lo, hi)
             elif code == 5:
                 if not ints[ints_at[a] + row]:  # a group outside its mask
                     at = _put_null(out, at)
@@ -483,10 +587,11 @@ class _Writer:
     top table's, or inside an :class:`Items` those of its part.
     """
 
-    __slots__ = ("_mask_at", "_pending", "floats", "ints", "ops", "rows", "texts")
+    __slots__ = ("_mask_at", "_pending", "floats", "ints", "ops", "rows", "text", "texts")
 
     def __init__(self, rows: int) -> None:
         self.rows = rows
+        self.text: Any = None  # the UTF-8 text :class:`Utf8` columns are written from, if any
         self.ops: list[tuple[int, Any, int, int]] = []
         self.floats: list[FloatArray] = []
         self.ints: list[Any] = []  # whole numbers, bools, masks and bounds
@@ -562,6 +667,17 @@ class _Writer:
         column.write(self)
         return True
 
+    def _choice(self, column: Choice) -> bool:
+        self._step(_CHOICE, self._add_ints(column.codes, "codes"), column.choices)  # type: ignore[arg-type]  # numbered in _program
+        return True
+
+    def _utf8(self, column: Utf8) -> bool:
+        if self.text is None or column.text is not self.text:
+            return False  # written from its cells
+        start = self._add_ints(column.start, "start")
+        self._step(_UTF8, start, self._add_ints(column.stop, "stop"), int(column.empty_null))
+        return True
+
     def _nested(self, column: Nested) -> bool:
         if column.table.rows != self.rows:
             return False  # written from its cells
@@ -605,10 +721,6 @@ class _Writer:
         self._step(_NEXT, 0)
         code, a, _, c = self.ops[step]
         self.ops[step] = (code, a, len(self.ops) - step - 1, c)
-
-    def table(self, table: Table, index: int) -> None:
-        """Write table ``index`` of a :class:`_Chain`."""
-        table.write(self)
 
     def run(self, sep: int) -> tuple[memoryview, IntArray, list[tuple[int, int, str]]]:
         """
@@ -700,132 +812,141 @@ def _text(texts: list[list[str]]) -> tuple[Any, IntArray, IntArray]:
     cells = [cell for column in texts for cell in column]
     text_at = np.fromiter(accumulate(map(len, cells), initial=0), np.int64, len(cells) + 1)
     text_col = np.fromiter(accumulate(map(len, texts), initial=0), np.int64, len(texts) + 1)
-    data = bytearray("".join(cells).encode("ascii"))
-    return np.frombuffer(data, dtype=np.uint8), text_at, text_col
+    data = "".join(cells).encode("ascii")
+    return np.frombuffer(data, dtype=np.uint8), text_at, text_col  # read-only: see _read_only
 
 
-class _Planner(_Writer):
+class Packed(NamedTuple):
     """
-    A :class:`_Writer` that also notes where each array of its program came from.
+    Named columns made by one compiled call: what :func:`sourced_pieces` writes from.
 
-    Each is found again in a table of the same schema by the Python expression that reaches
-    it from the table (``t``): through a table's columns, a tuple's items, a nested table's
-    columns or an item part (its columns, or the part itself for a column), then what of it
-    is read: ``values``, ``valid``, ``bounds`` or ``cells`` (of the rows of the array that
-    holds it, if any).
+    Float column ``i`` is ``floats[floats_at[i]:floats_at[i + 1]]``, named ``float_names[i]``;
+    whole-number columns (bools as 0 / 1) likewise, those in ``bool_names`` read as bools;
+    ``text`` holds the UTF-8 bytes :class:`Utf8` columns point into.
     """
 
-    __slots__ = ("_bases", "_levels", "_next", "_path", "consts", "sources")
+    floats: FloatArray
+    floats_at: IntArray
+    ints: IntArray
+    ints_at: IntArray
+    text: ByteArray
+    float_names: tuple[str, ...]
+    int_names: tuple[str, ...]
+    bool_names: frozenset[str]
 
-    def __init__(self, rows: int) -> None:
+    def columns(self) -> dict[str, Any]:
+        """Every column by name: views of the arrays (a copy as bools for the bool columns)."""
+        out: dict[str, Any] = {}
+        for i, name in enumerate(self.float_names):
+            out[name] = self.floats[self.floats_at[i] : self.floats_at[i + 1]]
+        for i, name in enumerate(self.int_names):
+            values = self.ints[self.ints_at[i] : self.ints_at[i + 1]]
+            out[name] = values.astype(bool) if name in self.bool_names else values
+        return out
+
+
+class _SourcePlanner(_Writer):
+    """
+    A :class:`_Writer` whose program reads a :class:`Packed`'s arrays as they are.
+
+    Each step names the packed column its values come from (not a column of its own), so
+    the program runs on any later :class:`Packed` of the same names without a table made or
+    an array copied. Every array the tables write must be one of the packed columns (a view
+    :meth:`Packed.columns` gave), and every text a :class:`Choice` or a :class:`Utf8` of
+    the packed text.
+    """
+
+    __slots__ = ("_float_of", "_int_of")
+
+    def __init__(self, rows: int, packed: Packed, columns: dict[str, Any]) -> None:
         super().__init__(rows)
-        self._path = ["t"]  # the expression of the column being written, and its parents
-        self._bases = [("t.columns", "columns")]  # how the columns at each level are reached
-        self._next = [0]  # the index of the next column at each level
-        self._levels = ["t.rows"]  # the rows of the level being written
-        self.sources: dict[str, list[str]] = {"floats": [], "ints": [], "texts": [], "consts": []}
-        self.consts: list[Any] = []
-
-    def column(self, column: Column) -> None:
-        """Write the column, and note the expression of every array it added."""
-        index = self._next[-1]
-        self._next[-1] += 1
-        base, style = self._bases[-1]
-        expr = {"columns": f"{base}[{index}][1]", "items": f"{base}[{index}]"}.get(style, base)
-        self._path.append(expr)
-        self._next.append(0)
-        self._bases.append(_children(column, expr))
-        if isinstance(column, Items):
-            self._levels.append(f"{expr}.part_rows")
-        super().column(column)
-        if isinstance(column, Items):
-            self._levels.pop()
-        if isinstance(column, Const):
-            self.sources["consts"].append(f"{expr}.value")
-            self.consts.append(column.value)
-        self._bases.pop()
-        self._next.pop()
-        self._path.pop()
-
-    def table(self, table: Table, index: int) -> None:
-        """Write table ``index`` of a :class:`_Chain`, its columns reached through it."""
-        self._bases.append((f"t.tables[{index}].columns", "columns"))
-        self._next.append(0)
-        self._levels.append(f"t.tables[{index}].rows")
-        super().table(table, index)
-        self._levels.pop()
-        self._next.pop()
-        self._bases.pop()
+        self.text = packed.text
+        self._float_of = {id(columns[n]): i for i, n in enumerate(packed.float_names)}
+        self._int_of = {id(columns[n]): i for i, n in enumerate(packed.int_names)}
 
     def _add_floats(self, values: FloatArray) -> int:
-        self.sources["floats"].append(f"{self._path[-1]}.values")
-        return super()._add_floats(values)
+        at = self._float_of.get(id(values))
+        if at is None:
+            msg = "a float column of a sourced table is not one of its packed columns"
+            raise ValueError(msg)
+        return at
 
     def _add_ints(self, values: Any, member: str) -> int:
-        self.sources["ints"].append(f"{self._path[-1]}.{member}")
-        return super()._add_ints(values, member)
+        at = self._int_of.get(id(values))
+        if at is None:
+            msg = f"the {member} of a sourced table's column are not one of its packed columns"
+            raise ValueError(msg)
+        return at
 
     def _add_text(self, column: Column) -> int:
-        self.sources["texts"].append(f"{self._path[-1]}.cells({self._levels[-1]})")
-        return super()._add_text(column)
-
-    def gather(self) -> Any:
-        """
-        A function taking what this walk found from a table of the same schema.
-
-        It returns the lists :func:`_render` reads and the values of the :class:`Const`
-        columns. Made from the expressions as one lambda: about 3 us for a document's fifty arrays,
-        where walking down to each of them took ten times that.
-        """
-        lists = ", ".join(f"[{', '.join(self.sources[kind])}]" for kind in ("floats", "ints"))
-        texts = ", ".join(self.sources["texts"])
-        consts = "".join(f"{c}, " for c in self.sources["consts"])
-        return eval(f"lambda t: ({lists}, [{texts}], ({consts}))")  # our own expressions
+        msg = f"a sourced table cannot write {type(column).__name__} from cells: use Choice or Utf8"
+        raise ValueError(msg)
 
 
-def _children(column: Column, expr: str) -> tuple[str, str]:
-    """How the columns inside ``column`` (at ``expr``) are reached, if it holds any."""
-    if isinstance(column, Tuple):
-        return f"{expr}.items", "items"
-    if isinstance(column, Nested):
-        return f"{expr}.table.columns", "columns"
-    if isinstance(column, Items):
-        if isinstance(column.part, Table):
-            return f"{expr}.part.columns", "columns"
-        return f"{expr}.part", "part"
-    return expr, "none"
+def _read_only(text: ByteArray) -> ByteArray:
+    """
+    ``text`` as a read-only array (a view if it is writable).
+
+    Whether an array is writable is part of its compiled type: the writer is given read-only
+    text always (a network's names are), so that it is compiled once, not twice.
+    """
+    if not text.flags.writeable:
+        return text
+    view = text.view()
+    view.flags.writeable = False
+    return view
 
 
-@dataclass(frozen=True, slots=True)
-class _Plan:
-    """A schema's program, and how its arrays are taken from a table (:class:`_Planner`)."""
-
-    program: tuple[IntArray, Any, IntArray]
-    gather: Any
-    consts: tuple[Any, ...]
+#: The program of each sourced schema (:func:`sourced_pieces`), made on its first call.
+_SOURCED: dict[str, tuple[IntArray, Any, IntArray]] = {}
+_NO_INTS = np.zeros(1, dtype=np.int64)
 
 
-#: The plan of each schema (:attr:`Table.schema`), made on its first table.
-_PLANS: dict[str, _Plan] = {}
+def sourced_pieces(
+    packed: Packed,
+    declare: Callable[[dict[str, Any], ByteArray], Sequence[tuple[Table, IntArray]]],
+    schema: str,
+) -> list[bytes | memoryview]:
+    """
+    :func:`chained_pieces` of the tables ``declare`` makes of ``packed``'s columns.
 
+    ``declare`` takes the columns by name (:meth:`Packed.columns`) and the packed text, and
+    returns each table with its ``[0, rows]`` bounds, a packed column too. It runs once per
+    ``schema``, on the first call: its walk becomes a program that reads the packed arrays
+    themselves, so later calls make no table and copy no array; the text is one compiled
+    call. A sourced schema's tables must have the same members, kinds and constants
+    whatever the columns hold (their program is not checked again).
 
-def _planned(
-    table: Table | _Chain, schema: str, sep: int
-) -> tuple[memoryview, IntArray, list[tuple[int, int, str]]]:
-    """:meth:`_Writer.run` of ``table`` by its schema's plan (made on the first table)."""
-    plan = _PLANS.get(schema)
-    if plan is not None:
-        floats, ints, texts, consts = plan.gather(table)
-        if consts == plan.consts:
-            return _render(plan.program, table.rows, floats, ints, texts, sep)
-    writer = _Planner(table.rows)
-    table.write(writer)
-    writer._flush()
-    plan = _Plan(_program(tuple(writer.ops)), writer.gather(), tuple(writer.consts))
-    if len(_PLANS) >= 64:  # schemas are few; never grow without bound
-        _PLANS.clear()
-    _PLANS[schema] = plan
-    return _render(plan.program, table.rows, writer.floats, writer.ints, writer.texts, sep)
+    Raises
+    ------
+    ValueError
+        If a table writes an array that is not one of the packed columns (on the first
+        call), or the columns' lengths do not fit the tables.
+    """
+    program = _SOURCED.get(schema)
+    if program is None:
+        columns = packed.columns()
+        tables = declare(columns, packed.text)
+        writer = _SourcePlanner(1, packed, columns)
+        _Chain([t for t, _ in tables], [b for _, b in tables]).write(writer)
+        writer._flush()
+        program = _program(tuple(writer.ops))
+        if len(_SOURCED) >= 64:  # schemas are few; never grow without bound
+            _SOURCED.clear()
+        _SOURCED[schema] = program
+    ops, lit, lit_at = program
+    out, _, slow = _write_rows(
+        1, -1, ops, lit, lit_at, packed.floats, packed.floats_at, packed.ints, packed.ints_at,
+        _read_only(packed.text), _NO_INTS, _NO_INTS, _POW10,
+    )  # fmt: skip
+    text = memoryview(out)
+    if not len(slow):
+        return [text]
+    fixes = [
+        (at, top, _repr(ops, packed.floats, packed.floats_at, k, r))
+        for at, k, r, top in slow.tolist()
+    ]
+    return _pieces(text, fixes)
 
 
 _PROGRAMS: dict[tuple[tuple[int, Any, int, int], ...], tuple[IntArray, Any, IntArray]] = {}
@@ -835,10 +956,8 @@ def _program(steps: tuple[tuple[int, Any, int, int], ...]) -> tuple[IntArray, An
     """``steps`` as the arrays :func:`_write_rows` reads, made once per program."""
     program = _PROGRAMS.get(steps)
     if program is None:
-        literals = [s[1] for s in steps if s[0] == _LIT]
-        ops = np.array(
-            [(code, a, b, c) for code, a, b, c in _numbered(steps)], dtype=np.int64
-        ).reshape(-1, 4)
+        literals, numbered = _numbered(steps)
+        ops = np.array(numbered, dtype=np.int64).reshape(-1, 4)
         lit = np.frombuffer(bytearray("".join(literals).encode("ascii")), dtype=np.uint8)
         lit_at = np.concatenate(([0], np.cumsum([len(t) for t in literals]))).astype(np.int64)
         if len(_PROGRAMS) >= 256:  # the tables' shapes are few; never grow without bound
@@ -847,17 +966,27 @@ def _program(steps: tuple[tuple[int, Any, int, int], ...]) -> tuple[IntArray, An
     return program
 
 
-def _numbered(steps: Sequence[tuple[int, Any, int, int]]) -> list[tuple[int, int, int, int]]:
-    """The steps with each literal replaced by its number."""
+def _numbered(
+    steps: Sequence[tuple[int, Any, int, int]],
+) -> tuple[list[str], list[tuple[int, int, int, int]]]:
+    """
+    The program's literals, and its steps with each literal replaced by its number.
+
+    A ``_CHOICE`` step's choices (quoted) are literals too: its ``b`` becomes the number of
+    the first, its ``c`` how many.
+    """
+    literals: list[str] = []
     out = []
-    n = 0
     for code, a, b, c in steps:
         if code == _LIT:
-            out.append((code, n, b, c))
-            n += 1
+            out.append((code, len(literals), b, c))
+            literals.append(a)
+        elif code == _CHOICE:
+            out.append((code, a, len(literals), len(b)))  # type: ignore[arg-type]  # the choices
+            literals.extend(_QUOTES[choice] for choice in b)  # type: ignore[attr-defined]
         else:
             out.append((code, a, b, c))
-    return out
+    return literals, out
 
 
 def _each(write: Any, rows: int) -> list[str]:
@@ -989,6 +1118,56 @@ class Strings:
 
 
 @dataclass(slots=True)  # not frozen: a document makes some fifty, a frozen one costs 3x
+class Choice:
+    """
+    One of a few texts per row, by number: ``choices[codes[row]]`` (a road's class).
+
+    Written from the program's literals (each choice quoted once), so no text per row.
+    """
+
+    codes: IntArray
+    choices: tuple[str, ...]
+
+    def cells(self, rows: int) -> list[str]:
+        """The quoted choices."""
+        return [_QUOTES[self.choices[c]] for c in np.asarray(self.codes).tolist()]
+
+    def objects(self, rows: int) -> list[Any]:
+        """The choices."""
+        return [self.choices[c] for c in np.asarray(self.codes).tolist()]
+
+
+@dataclass(slots=True)  # not frozen: a document makes some fifty, a frozen one costs 3x
+class Utf8:
+    """
+    Texts held as UTF-8 bytes: row ``r``'s is ``text[start[r]:stop[r]]``; ``null`` if empty.
+
+    With ``empty_null`` False an empty text is ``""``. Written by the compiled writer
+    itself (escaped as ``json.dumps`` does) when the table is written from its sources
+    (:func:`sourced_pieces`, whose text ``text`` is); otherwise from its cells.
+    """
+
+    text: ByteArray
+    start: IntArray
+    stop: IntArray
+    empty_null: bool = True
+
+    def _texts(self) -> list[str]:
+        raw = self.text.tobytes() if isinstance(self.text, np.ndarray) else bytes(self.text)
+        bounds = zip(np.asarray(self.start).tolist(), np.asarray(self.stop).tolist(), strict=True)
+        return [raw[a:b].decode("utf-8") for a, b in bounds]
+
+    def cells(self, rows: int) -> list[str]:
+        """The quoted texts."""
+        return [_QUOTES[value] for value in self.objects(rows)]
+
+    def objects(self, rows: int) -> list[Any]:
+        """The texts (``None`` for an empty one with ``empty_null``)."""
+        texts: list[Any] = self._texts()
+        return [t or None for t in texts] if self.empty_null else texts
+
+
+@dataclass(slots=True)  # not frozen: a document makes some fifty, a frozen one costs 3x
 class Tuple:
     """
     ``[a, b, ...]`` of some columns per row, e.g. a position ``[lon, lat]``.
@@ -1108,17 +1287,10 @@ class Table:
         Number of rows.
     columns
         ``(name, column)`` in member order.
-    schema
-        A name for tables made by the same code every time: the same members and column
-        kinds, masks shared by the same columns, the same decimals and geometry types (a
-        :class:`Const` may change: its value is checked). Its first table's walk over the
-        columns is kept (the program, and where each array sits), and later ones are
-        written from it without walking them again.
     """
 
     rows: int
     columns: Sequence[tuple[str, Column]]
-    schema: str | None = None
 
     def write(self, writer: _Writer) -> None:
         """Write each row's object."""
@@ -1135,12 +1307,9 @@ class Table:
         """The rows' objects as JSON text joined by commas (no brackets around them)."""
         if self.rows == 0:
             return b""
-        if self.schema is not None:
-            text, _, fixes = _planned(self, self.schema, ord(","))
-        else:
-            writer = _Writer(self.rows)
-            self.write(writer)
-            text, _, fixes = writer.run(ord(","))
+        writer = _Writer(self.rows)
+        self.write(writer)
+        text, _, fixes = writer.run(ord(","))
         return b"".join(_pieces(text, fixes))
 
     def text(self) -> str:
@@ -1161,24 +1330,26 @@ class _Chain:
 
     rows = 1
 
-    def __init__(self, tables: Sequence[Table]) -> None:
+    def __init__(self, tables: Sequence[Table], bounds: Sequence[IntArray] | None = None) -> None:
         self.tables = tables
-        self.bounds = [np.array([0, t.rows], dtype=np.int64) for t in tables]
+        self.bounds = (
+            [np.array([0, t.rows], dtype=np.int64) for t in tables] if bounds is None else bounds
+        )
 
     def write(self, writer: _Writer) -> None:
         """Write each table's rows, commas between all of them."""
         for i, table in enumerate(self.tables):
             opened = writer.each(self.bounds[i], table.rows, f"bounds[{i}]", join=True)
-            writer.table(table, i)
+            table.write(writer)
             writer.next(opened)
 
 
-def chained_ascii(tables: Sequence[Table], schema: str | None = None) -> bytes:
+def chained_ascii(tables: Sequence[Table]) -> bytes:
     """
     The rows' objects of several tables one after another, joined by commas, ASCII.
 
     ``b",".join(t.ascii() for t in tables if t.rows)``, written by one compiled call:
-    :func:`chained_pieces` (same parameters) joined.
+    :func:`chained_pieces` joined.
 
     Examples
     --------
@@ -1187,10 +1358,10 @@ def chained_ascii(tables: Sequence[Table], schema: str | None = None) -> bytes:
     >>> chained_ascii([segments, points, points])
     b'{"kind":"point","n":7},{"kind":"point","n":8},{"kind":"point","n":7},{"kind":"point","n":8}'
     """
-    return b"".join(chained_pieces(tables, schema))
+    return b"".join(chained_pieces(tables))
 
 
-def chained_pieces(tables: Sequence[Table], schema: str | None = None) -> list[bytes | memoryview]:
+def chained_pieces(tables: Sequence[Table]) -> list[bytes | memoryview]:
     """
     :func:`chained_ascii` as the pieces to join, views of the written buffer (not copied).
 
@@ -1200,9 +1371,6 @@ def chained_pieces(tables: Sequence[Table], schema: str | None = None) -> list[b
     ----------
     tables
         The tables, in order.
-    schema
-        A name for chains made by the same code every time (see :class:`Table`): the walk
-        over the columns of the first chain of a schema is kept for the later ones.
 
     Examples
     --------
@@ -1210,13 +1378,9 @@ def chained_pieces(tables: Sequence[Table], schema: str | None = None) -> list[b
     >>> b"".join((b"[", *chained_pieces([points]), b"]"))
     b'[{"kind":"point","n":7},{"kind":"point","n":8}]'
     """
-    chain = _Chain(tables)
-    if schema is not None:
-        text, _, fixes = _planned(chain, schema, -1)
-    else:
-        writer = _Writer(1)
-        chain.write(writer)
-        text, _, fixes = writer.run(-1)
+    writer = _Writer(1)
+    _Chain(tables).write(writer)
+    text, _, fixes = writer.run(-1)
     return _pieces(text, fixes)
 
 
@@ -1228,6 +1392,8 @@ _WRITES: dict[type, Any] = {
     Bools: _Writer._bools,
     Const: _Writer._const,
     Tuple: _Writer._tuple,
+    Choice: _Writer._choice,
+    Utf8: _Writer._utf8,
     Nested: _Writer._nested,
     Items: _Writer._items,
 }

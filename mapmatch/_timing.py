@@ -31,8 +31,12 @@ __all__ = [
     "PathPositions",
     "SegmentPaths",
     "edge_times",
+    "kph",
     "path_positions",
+    "place_and_time_kernel",
     "positions_and_times",
+    "span_times",
+    "speeds_kph",
 ]
 
 _EPS_M = 1e-6
@@ -347,7 +351,7 @@ def _time_all(  # type: ignore[no-untyped-def]  # pragma: no cover
 
 
 @njit(cache=True, nogil=True)
-def _place_and_time_all(  # type: ignore[no-untyped-def]  # pragma: no cover
+def place_and_time_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover
     seg_index, bounds, seg_edge, start_m, end_m, point_segment, matched, edge, offset_m, time_s
 ):
     """:func:`_place_all` and :func:`_time_all` in one call."""
@@ -356,6 +360,38 @@ def _place_and_time_all(  # type: ignore[no-untyped-def]  # pragma: no cover
     )
     times = _time_all(seg_index, bounds, start_m, end_m, point_segment, matched, time_s, along)
     return edge_index, along, times
+
+
+@njit(cache=True, nogil=True, inline="always")
+def kph(metres, seconds):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """Metres over seconds in km/h; NaN where no time passed (or none is known)."""
+    return 3.6 * metres / seconds if seconds > 0 else np.nan
+
+
+@njit(cache=True, nogil=True)
+def speeds_kph(metres, seconds):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """:func:`kph` of each entry."""
+    out = np.empty(len(metres))
+    for i in range(len(metres)):
+        out[i] = kph(metres[i], seconds[i])
+    return out
+
+
+@njit(cache=True, nogil=True)
+def span_times(entry_s, exit_s, bounds):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    Each segment's first entry and last exit time, its edges ``bounds[s]:bounds[s + 1]``.
+
+    NaN for a segment without edges (and where the times are).
+    """
+    count = len(bounds) - 1
+    start = np.full(count, np.nan)
+    end = np.full(count, np.nan)
+    for s in range(count):
+        if bounds[s + 1] > bounds[s]:
+            start[s] = entry_s[bounds[s]]
+            end[s] = exit_s[bounds[s + 1] - 1]
+    return start, end
 
 
 def _edge_times(times: FloatArray) -> EdgeTimes:
@@ -397,5 +433,5 @@ def positions_and_times(
 ) -> tuple[PathPositions, EdgeTimes]:
     """:func:`path_positions` and :func:`edge_times` of ``result``, in one compiled call."""
     time_s = np.asarray(result.points.time_s, dtype=np.float64)
-    edge_index, along, times = _place_and_time_all(*paths.arrays(), *_fixes(result), time_s)
+    edge_index, along, times = place_and_time_kernel(*paths.arrays(), *_fixes(result), time_s)
     return PathPositions(edge_index=edge_index, along_m=along), _edge_times(times)

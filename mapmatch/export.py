@@ -13,9 +13,11 @@ One module writes what a :class:`~mapmatch.result.MatchResult` becomes outside P
 - :func:`points_frame`: one row per fix (``MatchResult.to_dataframe()``).
 - :func:`edges_frame`: one row per driven edge.
 
-Each feature's members are declared once (:func:`_point_table`, :func:`_segment_table`) and
+Each feature's members are declared once (:func:`_point_table`, :func:`_segment_table`) over
+the result's feature columns, made by one compiled call (:mod:`mapmatch._features`), and
 rendered either as text or as objects (:mod:`mapmatch._jsontext`), so the two always agree;
-the text is written from the arrays, column by column, without a dict per point.
+the text is written by one more compiled call straight from those columns, without a dict
+per point or a Python object per column.
 
 Numbers are written as Python writes them, rounded to a fixed number of decimals:
 coordinates 7 (about 1 cm, numpy's rounding), metres 3 and confidences 4 (Python's
@@ -26,23 +28,24 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
-from itertools import accumulate
 from json.encoder import c_make_encoder, encode_basestring_ascii  # type: ignore[attr-defined]
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
+from mapmatch._features import feature_columns
 from mapmatch._jsontext import (
     Bools,
+    Choice,
     Const,
     Floats,
     Ints,
     Items,
     Nested,
-    Strings,
     Table,
     Tuple,
-    chained_pieces,
+    Utf8,
+    sourced_pieces,
 )
 from mapmatch._timing import (
     EdgeTimes,
@@ -51,6 +54,8 @@ from mapmatch._timing import (
     edge_times,
     path_positions,
     positions_and_times,
+    span_times,
+    speeds_kph,
 )
 from mapmatch.result import EdgeAttributes
 
@@ -61,8 +66,8 @@ if TYPE_CHECKING:
     import geopandas as gpd  # type: ignore[import-untyped]
     import pandas as pd
 
-    from mapmatch.result import MatchResult, Segment
-    from mapmatch.types import BoolArray, FloatArray, IntArray
+    from mapmatch.result import MatchResult
+    from mapmatch.types import BoolArray, ByteArray, FloatArray, IntArray
 
 __all__ = [
     "COORD_DIGITS",
@@ -161,9 +166,7 @@ class EdgeTable:
     @property
     def mean_speed_kph(self) -> FloatArray:
         """Driven metres over seconds on each edge, km/h; NaN where no time passed."""
-        duration = self.duration_s
-        # NaN where no time passed: no warning (np.errstate costs more than the division)
-        speed: FloatArray = 3.6 * self.driven_m / np.where(duration > 0, duration, np.nan)
+        speed: FloatArray = speeds_kph(self.driven_m, self.duration_s)
         return speed
 
 
@@ -218,37 +221,44 @@ def _edge_table(result: MatchResult, paths: SegmentPaths, times: EdgeTimes) -> E
 # --------------------------------------------------------------------------- GeoJSON
 
 
-def _point_table(result: MatchResult, positions: PathPositions) -> Table:
+def _feature_tables(c: dict[str, Any], text: ByteArray) -> list[tuple[Table, IntArray]]:
+    """
+    The segment and the point Features, each with its ``[0, rows]``, of a result's columns.
+
+    ``c`` are :func:`~mapmatch._features.feature_columns`' columns by name, ``text`` the
+    names' bytes. Every array here is one of the columns as given: the text is written from
+    the packed arrays themselves (:func:`~mapmatch._jsontext.sourced_pieces`).
+    """
+    return [(_segment_table(c, text), c["segment_rows"]), (_point_table(c), c["point_rows"])]
+
+
+def _point_table(c: dict[str, Any]) -> Table:
     """The ``point`` Features, one row per fix."""
-    p = result.points
-    n = len(p.time_s)
-    matched = np.asarray(p.matched, dtype=bool)
-    on_path = positions.edge_index >= 0
+    n = len(c["time_s"])
+    matched = c["matched"]
     properties = Table(
         n,
         [
             ("kind", Const("point")),
-            ("index", Ints(np.arange(n))),
-            ("time", Floats(p.time_s, decimals=_SECONDS)),
+            ("index", Ints(c["index"])),
+            ("time", Floats(c["time_s"], decimals=_SECONDS)),
             ("matched", Bools(matched)),
-            ("u", Ints(p.u, matched)),
-            ("v", Ints(p.v, matched)),
-            ("key", Ints(p.key, matched)),
-            ("offset_m", _rounded(p.offset_m, _METRES)),
-            ("distance_m", _rounded(p.distance_m, _METRES)),
-            ("confidence", _rounded(p.confidence, _CONFIDENCE)),
-            ("interpolated", Bools(p.interpolated)),
-            ("outlier", Bools(p.outlier)),
-            ("segment", Ints(p.segment, matched)),
-            ("edge_index", Ints(positions.edge_index, on_path)),
-            ("along_m", _rounded(positions.along_m, _METRES)),
+            ("u", Ints(c["u"], matched)),
+            ("v", Ints(c["v"], matched)),
+            ("key", Ints(c["key"], matched)),
+            ("offset_m", _rounded(c["offset_m"], _METRES)),
+            ("distance_m", _rounded(c["distance_m"], _METRES)),
+            ("confidence", _rounded(c["confidence"], _CONFIDENCE)),
+            ("interpolated", Bools(c["interpolated"])),
+            ("outlier", Bools(c["outlier"])),
+            ("segment", Ints(c["segment"], matched)),
+            ("edge_index", Ints(c["edge_index"], c["on_path"])),
+            ("along_m", _rounded(c["along_m"], _METRES)),
         ],
     )
-    position = Tuple((_coordinates(p.lon), _coordinates(p.lat)), matched, "Point")
+    position = Tuple((_coordinates(c["lon"]), _coordinates(c["lat"])), matched, "Point")
     return Table(
-        n,
-        [("type", Const("Feature")), ("geometry", position), ("properties", Nested(properties))],
-        schema="geojson-point",
+        n, [("type", Const("Feature")), ("geometry", position), ("properties", Nested(properties))]
     )
 
 
@@ -262,84 +272,55 @@ def _coordinates(degrees: FloatArray) -> Floats:
     return Floats(degrees, decimals=COORD_DIGITS, rounding="numpy")
 
 
-def _edge_json(edges: EdgeTable) -> Table:
-    """The ``edges`` of the segment Features: one row per row of the result's edge table."""
-    names = [name or None for name in edges.name]
+def _edge_json(c: dict[str, Any], text: ByteArray) -> Table:
+    """The ``edges`` of the segment Features: one row per driven edge."""
+    from roadnets.drivable import ROAD_CLASSES
+
     return Table(
-        len(edges),
+        len(c["edge_u"]),
         [
-            ("u", Ints(edges.u)),
-            ("v", Ints(edges.v)),
-            ("key", Ints(edges.key)),
-            ("osm_way_ids", Tuple((Ints(edges.way_id),))),
-            ("length_m", _rounded(edges.length_m, _METRES)),
-            ("start_offset_m", _rounded(edges.start_offset_m, _METRES)),
-            ("end_offset_m", _rounded(edges.end_offset_m, _METRES)),
-            ("name", Strings(names)),
-            ("road_class", Strings(edges.road_class)),
-            ("speed_limit_kph", _rounded(edges.speed_limit_kph, 1)),
-            ("entry_time", _rounded(edges.entry_time_s, _SECONDS)),
-            ("exit_time", _rounded(edges.exit_time_s, _SECONDS)),
-            ("duration_s", _rounded(edges.duration_s, _SECONDS)),
-            ("mean_speed_kph", _rounded(edges.mean_speed_kph, 2)),
+            ("u", Ints(c["edge_u"])),
+            ("v", Ints(c["edge_v"])),
+            ("key", Ints(c["edge_key"])),
+            ("osm_way_ids", Tuple((Ints(c["way_id"]),))),
+            ("length_m", _rounded(c["edge_length_m"], _METRES)),
+            ("start_offset_m", _rounded(c["start_offset_m"], _METRES)),
+            ("end_offset_m", _rounded(c["end_offset_m"], _METRES)),
+            ("name", Utf8(text, c["name_start"], c["name_stop"])),
+            ("road_class", Choice(c["road_class"], ROAD_CLASSES)),
+            ("speed_limit_kph", _rounded(c["speed_limit_kph"], 1)),
+            ("entry_time", _rounded(c["entry_time_s"], _SECONDS)),
+            ("exit_time", _rounded(c["exit_time_s"], _SECONDS)),
+            ("duration_s", _rounded(c["duration_s"], _SECONDS)),
+            ("mean_speed_kph", _rounded(c["mean_speed_kph"], 2)),
         ],
     )
 
 
-def _paths(segs: list[Segment]) -> Items:
-    """Each segment's LineString: its path's vertices (a lone vertex twice: a line needs two)."""
-    lons = [s.lon if len(s.lon) != 1 else np.repeat(s.lon, 2) for s in segs]
-    lats = [s.lat if len(s.lat) != 1 else np.repeat(s.lat, 2) for s in segs]
-    bounds = np.fromiter(accumulate(map(len, lons), initial=0), np.int64, len(segs) + 1)
-    if len(segs) == 1:
-        lon, lat = lons[0], lats[0]
-    else:
-        lon, lat = (np.concatenate(x) if x else np.zeros(0) for x in (lons, lats))
-    return Items(Tuple((_coordinates(lon), _coordinates(lat))), bounds, geometry="LineString")
-
-
-def _segment_table(result: MatchResult, paths: SegmentPaths, edges: EdgeTable) -> Table:
+def _segment_table(c: dict[str, Any], text: ByteArray) -> Table:
     """The ``segment`` Features, one row per segment."""
-    segs = result.segments
-    count = len(segs)
-    lengths = np.array([s.length_m for s in segs], dtype=np.float64)
-    start, end = _segment_times(edges, paths.bounds)
+    count = len(c["segment_index"])
     properties = Table(
         count,
         [
             ("kind", Const("segment")),
-            ("segment", Ints(paths.index)),
-            ("point_range", Tuple((Ints(paths.first), Ints(paths.last)))),
-            ("length_m", _rounded(lengths, _METRES)),
-            ("edges", Items(_edge_json(edges), paths.bounds)),
-            ("start_time", _rounded(start, _SECONDS)),
-            ("end_time", _rounded(end, _SECONDS)),
+            ("segment", Ints(c["segment_index"])),
+            ("point_range", Tuple((Ints(c["first_point"]), Ints(c["last_point"])))),
+            ("length_m", _rounded(c["segment_length_m"], _METRES)),
+            ("edges", Items(_edge_json(c, text), c["edge_bounds"])),
+            ("start_time", _rounded(c["segment_start_s"], _SECONDS)),
+            ("end_time", _rounded(c["segment_end_s"], _SECONDS)),
         ],
     )
+    line = Tuple((_coordinates(c["vertex_lon"]), _coordinates(c["vertex_lat"])))
     return Table(
         count,
         [
             ("type", Const("Feature")),
-            ("geometry", _paths(segs)),
+            ("geometry", Items(line, c["vertex_bounds"], geometry="LineString")),
             ("properties", Nested(properties)),
         ],
-        schema="geojson-segment",
     )
-
-
-def _segment_times(edges: EdgeTable, bounds: IntArray) -> tuple[FloatArray, FloatArray]:
-    """Each segment's first entry and last exit time (NaN without times or edges)."""
-    if len(bounds) == 2 and bounds[1] > 0:  # one segment with edges: views, no gathers
-        return edges.entry_time_s[:1], edges.exit_time_s[bounds[1] - 1 : bounds[1]]
-    first, after = bounds[:-1], bounds[1:]
-    if (after > first).all():  # every segment has edges, as a match's do
-        return edges.entry_time_s[first], edges.exit_time_s[after - 1]
-    start = np.full(len(bounds) - 1, np.nan)
-    end = np.full(len(bounds) - 1, np.nan)
-    has = after > first
-    start[has] = edges.entry_time_s[first[has]]
-    end[has] = edges.exit_time_s[after[has] - 1]
-    return start, end
 
 
 def _compact_encoder() -> Callable[[Any], str]:
@@ -394,24 +375,17 @@ def geojson_bytes(result: MatchResult) -> bytes:
         points).
     """
     head = _COMPACT(_head(result))
-    features = chained_pieces(_feature_tables(result), schema="geojson-features")
+    features = sourced_pieces(feature_columns(result), _feature_tables, "geojson-features")
     return b"".join((head[:-1].encode("ascii"), b',"features":[', *features, b"]}"))
 
 
 def geojson_dict(result: MatchResult) -> dict[str, Any]:
     """The GeoJSON document of :func:`geojson_bytes` as Python objects."""
     doc = _head(result)
-    segments, points = _feature_tables(result)
-    doc["features"] = segments.objects() + points.objects()
+    packed = feature_columns(result)
+    tables = _feature_tables(packed.columns(), packed.text)
+    doc["features"] = [feature for table, _ in tables for feature in table.objects()]
     return doc
-
-
-def _feature_tables(result: MatchResult) -> tuple[Table, Table]:
-    """The segment and the point Features of ``result``."""
-    paths = SegmentPaths.of(result.segments)
-    positions, times = positions_and_times(result, paths)
-    edges = _edge_table(result, paths, times)
-    return _segment_table(result, paths, edges), _point_table(result, positions)
 
 
 # --------------------------------------------------------------------------- tables
@@ -535,11 +509,9 @@ def segments_frame(result: MatchResult, table: EdgeTable | None = None) -> pd.Da
     t = table if table is not None else edge_table(result)
     segs = result.segments
     bounds = np.concatenate(([0], np.cumsum([len(s.edge) for s in segs], dtype=np.int64)))
-    start, end = _segment_times(t, bounds)
+    start, end = span_times(t.entry_time_s, t.exit_time_s, bounds)
     length = np.array([s.length_m for s in segs], dtype=np.float64)
     duration = end - start
-    with np.errstate(invalid="ignore", divide="ignore"):
-        speed = np.where(duration > 0, 3.6 * length / duration, np.nan)
     return pd.DataFrame(
         {
             "trace_id": np.full(len(segs), result.trace_id, dtype=object),
@@ -551,7 +523,7 @@ def segments_frame(result: MatchResult, table: EdgeTable | None = None) -> pd.Da
             "start_time": _utc(start),
             "end_time": _utc(end),
             "duration_s": duration,
-            "mean_speed_kph": speed,
+            "mean_speed_kph": speeds_kph(length, duration),
         }
     )
 

@@ -245,6 +245,11 @@ class Segment:
         return (_restore_segment, (path, known))
 
     @property
+    def net(self) -> RoadNetwork | None:
+        """The network matched on (``None`` for an unpickled segment, which carries its own)."""
+        return self._net
+
+    @property
     def length_m(self) -> float:
         """Metres along the path, from the first fix's place to the last's."""
         return float(sum((self.end_offset_m - self.start_offset_m).tolist()))

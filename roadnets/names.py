@@ -173,6 +173,17 @@ class WayNames(MutableMapping[int, str]):
 
     __hash__ = None  # type: ignore[assignment]  # mutable, as a dict
 
+    def arrays(self) -> tuple[IntArray, IntArray, ByteArray] | None:
+        """
+        The names as the compiled gathers read them, or ``None`` once edited in this process.
+
+        ``(ids, ptr, blob)``: the sorted named ways, where each one's UTF-8 name starts in
+        ``blob`` (and the end). An edited mapping is read through its edits, not these.
+        """
+        if self._overlay or self._deleted:
+            return None
+        return self._ids, self._ptr, self._blob
+
     def names_of(self, way_ids: npt.NDArray[np.integer[Any]]) -> list[str]:
         """The name of each way of an array (``""`` where it has none), one search for all."""
         ways = np.asarray(way_ids, dtype=np.int64).ravel()

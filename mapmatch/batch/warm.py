@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import pickle
 import time
 
-__all__ = ["WARMUP_S", "warm_up"]
+__all__ = ["WARMUP_S", "block_graph", "warm_up"]
 
 
-def _block() -> object:
+def block_graph() -> object:
     """A square block of two-way residential streets, about 100 m a side (a networkx graph)."""
     import networkx as nx
 
@@ -50,11 +51,15 @@ def warm_up() -> float:
             from mapmatch.matcher import match
             from mapmatch.trace import Trace
 
-            net = roadnets.from_graph(_block(), network_id="warm-up")
+            net = roadnets.from_graph(block_graph(), network_id="warm-up")
             lon = [7.4201, 7.4206, 7.4211, 7.4212, 7.4212]
             lat = [43.73001, 43.73002, 43.73001, 43.7304, 43.7308]
             trace = Trace(time=[0, 5, 10, 15, 20], lon=lon, lat=lat, heading=[90, 90, 90, 0, 0])
-            geojson_bytes(match(trace, net))  # the writer's number kernel too
+            result = match(trace, net)
+            geojson_bytes(result)  # the writer's number kernel too
+            # a result sent back by a worker process carries its segments' attributes and
+            # lines, not the network: its GeoJSON columns come from a kernel of their own
+            geojson_bytes(pickle.loads(pickle.dumps(result)))
             # every column given: the travel terms (speed, odometer) and per-fix accuracy
             # compile kernel variants of their own
             full = Trace(

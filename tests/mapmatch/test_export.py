@@ -354,28 +354,64 @@ def test_the_number_kernel_writes_what_repr_writes(decimals: int) -> None:
     assert cells == [repr(v) if np.isfinite(v) else "null" for v in values.tolist()]
 
 
-def test_a_table_written_by_its_schemas_plan_is_the_table_walked() -> None:
-    from mapmatch._jsontext import Const, Floats, Ints, Nested, Strings, Table, Tuple
+#: Street names that are easy to write wrong: quotes, backslashes, accents, an emoji, controls.
+_AWKWARD_NAMES = ('Rue "Grimaldi"', "C:\\Voie", "Straße\tNord\x7f", "\U0001f697 Lane")
 
-    def table(seed: int, kind: str, schema: str | None) -> Table:
-        rng = np.random.default_rng(seed)
-        n = int(rng.integers(1, 9))
-        valid = rng.random(n) < 0.7
-        inner = Table(n, [("u", Ints(rng.integers(-50, 50, n), valid)), ("x", Ints(np.arange(n)))])
-        return Table(
-            n,
-            [
-                ("kind", Const(kind)),
-                ("at", Tuple((Floats(rng.uniform(-9, 9, n), rounding="numpy"),), valid, "Point")),
-                ("d", Floats(np.where(valid, rng.uniform(0, 1e4, n), np.nan), decimals=2)),
-                ("name", Strings([None if v else "Rue d'Alsace" for v in valid])),
-                ("properties", Nested(inner)),
-            ],
-            schema=schema,
-        )
 
-    for seed in range(12):
-        kind = "point" if seed < 8 else "vertex"  # a Const that changes is written as it is
-        planned = table(seed, kind, "test-schema").ascii()
-        assert planned == table(seed, kind, None).ascii(), seed
-        assert json.loads(b"[" + planned + b"]")[0]["kind"] == kind
+def _named_block() -> roadnets.RoadNetwork:
+    """The warm-up's block of two-way streets, about 100 m a side, each side an awkward name."""
+    import roadnets
+    from mapmatch.batch.warm import block_graph
+
+    G: Any = block_graph()
+    sides = sorted({tuple(sorted((u, v))) for u, v in G.edges()})
+    for u, v, data in G.edges(data=True):
+        way = sides.index(tuple(sorted((u, v))))
+        data.update(osmid=100 + way, name=_AWKWARD_NAMES[way])
+    return roadnets.from_graph(G, network_id="named block")
+
+
+def _around_the_block(net: roadnets.RoadNetwork) -> mapmatch.MatchResult:
+    """Once around the block, along every side."""
+    lon = [7.4201, 7.4206, 7.4211, 7.4212, 7.4212, 7.4206, 7.4201, 7.42, 7.42]
+    lat = [43.73001, 43.73002, 43.73001, 43.7304, 43.7308, 43.73089, 43.73089, 43.7305, 43.7302]
+    trace = mapmatch.Trace(time=np.arange(len(lon)) * 5.0, lon=lon, lat=lat)
+    return mapmatch.match(trace, net)
+
+
+def _edge_names(doc: dict[str, Any]) -> list[str | None]:
+    return [
+        e["name"]
+        for f in doc["features"]
+        if f["properties"]["kind"] == "segment"
+        for e in f["properties"]["edges"]
+    ]
+
+
+def test_street_names_are_written_as_json_dumps_writes_them() -> None:
+    from mapmatch import _features
+
+    net = _named_block()
+    assert _features._network_inputs(net) is not None  # read inside the compiled call
+    result = _around_the_block(net)
+    text = export.geojson_bytes(result)
+    doc = result.to_geojson()
+    assert json.dumps(doc, allow_nan=False, separators=(",", ":")).encode() == text
+    names = _edge_names(json.loads(text))
+    assert set(names) == set(_AWKWARD_NAMES)
+    assert names == [e.name or None for s in result.segments for e in s.edges]
+    for escaped in (b'"Rue \\"Grimaldi\\""', b'"C:\\\\Voie"', b'"Stra\\u00dfe\\tNord\\u007f"',
+                    b'"\\ud83d\\ude97 Lane"'):  # fmt: skip
+        assert escaped in text
+
+
+def test_an_edited_street_name_is_written_as_edited() -> None:
+    from mapmatch import _features
+
+    net = _named_block()
+    net.way_names[100] = 'Avenue "Nouvelle"'  # this process only; read through the edit
+    assert _features._network_inputs(net) is None
+    edited = _around_the_block(net)
+    text = export.geojson_bytes(edited)
+    assert json.dumps(edited.to_geojson(), allow_nan=False, separators=(",", ":")).encode() == text
+    assert set(_edge_names(json.loads(text))) == {'Avenue "Nouvelle"', *_AWKWARD_NAMES[1:]}

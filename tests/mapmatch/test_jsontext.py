@@ -47,7 +47,8 @@ def _segments(draw: st.DrawFn) -> tuple[Any, ...]:
     return bounds, inner, outer, decimals, rounding
 
 
-def _table(case: tuple[Any, ...], schema: str | None) -> jt.Table:
+def _table(case: tuple[Any, ...], name: jt.Column | None = None) -> jt.Table:
+    """The case's table; its names ``name`` where given (else its strings)."""
     bounds, inner, outer, decimals, rounding = case
     n = int(bounds[-1])
     edges = jt.Table(
@@ -55,7 +56,7 @@ def _table(case: tuple[Any, ...], schema: str | None) -> jt.Table:
         [
             ("x", jt.Floats(inner["x"], decimals=decimals, rounding=rounding)),
             ("u", jt.Ints(inner["u"], inner["valid"])),
-            ("name", jt.Strings(inner["name"])),
+            ("name", jt.Strings(inner["name"]) if name is None else name),
             ("ids", jt.Tuple((jt.Ints(inner["u"]),), inner["valid"])),
         ],
     )
@@ -71,16 +72,53 @@ def _table(case: tuple[Any, ...], schema: str | None) -> jt.Table:
             ("properties", jt.Nested(properties)),
             ("t", jt.Floats(outer, decimals=3, rounding="python")),
         ],
-        schema=None if schema is None else f"{schema}-{decimals}-{rounding}",
     )
+
+
+def _packed(case: tuple[Any, ...]) -> jt.Packed:
+    """The case's columns packed as one compiled call gives them, its names as UTF-8."""
+    bounds, inner, outer, _, _ = case
+    encoded = [(name or "").encode("utf-8") for name in inner["name"]]
+    stop = np.cumsum([len(e) for e in encoded], dtype=np.int64)
+    floats = {"x": inner["x"], "lon": inner["lon"], "outer": outer}
+    ints = {
+        "u": inner["u"],
+        "valid": inner["valid"],
+        "bounds": bounds,
+        "start": stop - [len(e) for e in encoded],
+        "stop": stop,
+        "rows": np.array([0, len(bounds) - 1]),
+    }
+
+    def packed(columns: dict[str, Any], dtype: type) -> tuple[Any, Any]:
+        at = np.cumsum([0, *map(len, columns.values())], dtype=np.int64)
+        values = [np.asarray(c, dtype=dtype) for c in columns.values()]
+        return np.concatenate([np.zeros(0, dtype=dtype), *values]), at
+
+    text = np.frombuffer(bytearray(b"".join(encoded)), dtype=np.uint8)
+    return jt.Packed(
+        *packed(floats, np.float64), *packed(ints, np.int64), text, tuple(floats), tuple(ints),
+        frozenset({"valid"}),
+    )  # fmt: skip
+
+
+def _declared(case: tuple[Any, ...]) -> Any:
+    """A declaration of the case's table over packed columns, as :func:`sourced_pieces` takes."""
+    _, _, _, decimals, rounding = case
+
+    def declare(c: dict[str, Any], text: Any) -> list[tuple[jt.Table, Any]]:
+        inner = {"x": c["x"], "u": c["u"], "valid": c["valid"], "lon": c["lon"], "name": None}
+        names = jt.Utf8(text, c["start"], c["stop"])
+        return [(_table((c["bounds"], inner, c["outer"], decimals, rounding), names), c["rows"])]
+
+    return declare
 
 
 @settings(max_examples=300, deadline=None)
 @given(_segments())
 def test_arrays_of_items_are_written_as_json_dumps_writes_them(case: tuple[Any, ...]) -> None:
-    walked = _table(case, None)
+    walked = _table(case)
     assert f"[{walked.text()}]" == _dumped(walked.objects())
-    assert _table(case, "test-items").text() == walked.text()  # by the schema's plan
     cells = jt.Nested(walked).cells(walked.rows)
     assert cells == [_dumped(row) for row in walked.objects()]
 
@@ -110,12 +148,80 @@ def test_a_column_of_the_wrong_length_is_refused() -> None:
 @settings(max_examples=100, deadline=None)
 @given(st.lists(_segments(), max_size=3))
 def test_a_chain_of_tables_is_their_rows_joined(cases: list[tuple[Any, ...]]) -> None:
-    tables = [_table(case, None) for case in cases]
+    tables = [_table(case) for case in cases]
     expected = b",".join(t.ascii() for t in tables if t.rows)  # empty tables add no comma
     assert jt.chained_ascii(tables) == expected
-    schema = "test-chain-" + "-".join(f"{case[3]}{case[4]}" for case in cases)
-    assert jt.chained_ascii(tables, schema) == expected  # by the plan: the same
-    assert jt.chained_ascii(tables, schema) == expected
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(_segments(), min_size=1, max_size=3))
+def test_a_sourced_table_is_the_table_walked(cases: list[tuple[Any, ...]]) -> None:
+    for case in cases:  # the first of a schema makes its program, the others run it
+        schema = f"test-sourced-{case[3]}-{case[4]}"  # the program holds the decimals
+        packed = _packed(case)
+        tables = _declared(case)(packed.columns(), packed.text)
+        walked = b",".join(t.ascii() for t, _ in tables if t.rows)
+        assert b"".join(jt.sourced_pieces(packed, _declared(case), schema)) == walked
+        assert json.loads(b"[" + walked + b"]") == [o for t, _ in tables for o in t.objects()]
+
+
+#: Every character a string may hold but lone surrogates (UTF-8 cannot carry them).
+_TEXTS = st.text(st.characters(exclude_categories=("Cs",)), max_size=12)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(_TEXTS, max_size=6))
+def test_utf8_texts_are_escaped_as_json_dumps_escapes_them(texts: list[str]) -> None:
+    texts += ['a "quote"', "back\\slash", "tab\tnew\nline\x00\x1f\x7f", "Straße", "\U0001f697"]
+    encoded = [t.encode("utf-8") for t in texts]
+    stop = np.cumsum([len(e) for e in encoded], dtype=np.int64)
+    start = stop - [len(e) for e in encoded]
+    rows = np.array([0, len(texts)])
+    packed = jt.Packed(
+        np.zeros(0), np.zeros(1, dtype=np.int64), np.concatenate((start, stop, rows)),
+        np.array([0, len(texts), 2 * len(texts), 2 * len(texts) + 2]),
+        np.frombuffer(bytearray(b"".join(encoded)), dtype=np.uint8), (), ("start", "stop", "rows"),
+        frozenset(),
+    )  # fmt: skip
+
+    def declare(c: dict[str, Any], text: Any) -> list[tuple[jt.Table, Any]]:
+        name = jt.Utf8(text, c["start"], c["stop"], empty_null=False)
+        return [(jt.Table(len(c["start"]), [("name", name)]), c["rows"])]
+
+    written = b"".join(jt.sourced_pieces(packed, declare, "test-utf8"))
+    assert written.decode("ascii") == ",".join(_dumped({"name": t}) for t in texts)
+
+
+def test_a_choice_is_one_of_its_texts() -> None:
+    codes = np.array([2, 0, 1, 2])
+    table = jt.Table(4, [("road", jt.Choice(codes, ("primary", 'say "hi"', "Straße")))])
+    assert table.text() == _dumped(table.objects())[1:-1]
+    assert table.objects()[1] == {"road": "primary"}
+    with pytest.raises(ValueError, match="choice"):
+        jt.Table(1, [("road", jt.Choice(np.array([3]), ("a", "b", "c")))]).text()
+
+
+def test_a_sourced_table_reads_only_its_packed_columns() -> None:
+    case = (np.array([0, 1]), {"x": np.ones(1), "u": np.ones(1, dtype=np.int64),
+            "valid": np.ones(1, dtype=bool), "name": ["a"], "lon": np.ones(1)},
+            np.ones(1), 3, "none")  # fmt: skip
+    packed = _packed(case)
+
+    def derived(c: dict[str, Any], text: Any) -> list[tuple[jt.Table, Any]]:
+        return [(jt.Table(1, [("x", jt.Floats(c["x"] * 2))]), c["rows"])]
+
+    with pytest.raises(ValueError, match="not one of its packed columns"):
+        jt.sourced_pieces(packed, derived, "test-derived")
+
+    def cells(c: dict[str, Any], text: Any) -> list[tuple[jt.Table, Any]]:
+        return [(jt.Table(1, [("name", jt.Strings(["a"]))]), c["rows"])]
+
+    with pytest.raises(ValueError, match="Choice or Utf8"):
+        jt.sourced_pieces(packed, cells, "test-cells")
+    outside = packed._replace(ints=packed.ints.copy())
+    outside.ints[outside.ints_at[4]] = 99  # the name's stop past the text
+    with pytest.raises(ValueError, match="outside the text"):
+        jt.sourced_pieces(outside, _declared(case), "test-outside")
 
 
 @settings(max_examples=500, deadline=None)
