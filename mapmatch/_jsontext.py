@@ -1153,9 +1153,10 @@ class Utf8:
     empty_null: bool = True
 
     def _texts(self) -> list[str]:
-        raw = self.text.tobytes() if isinstance(self.text, np.ndarray) else bytes(self.text)
+        # each text's own bytes: the text may be a whole network's names, not to be copied
+        text = np.ascontiguousarray(self.text, dtype=np.uint8).data
         bounds = zip(np.asarray(self.start).tolist(), np.asarray(self.stop).tolist(), strict=True)
-        return [raw[a:b].decode("utf-8") for a, b in bounds]
+        return [str(text[a:b], "utf-8") for a, b in bounds]
 
     def cells(self, rows: int) -> list[str]:
         """The quoted texts."""
