@@ -155,7 +155,7 @@ def _behind(edge, offset, front_edge, front, limit, edge_len, routing):  # type:
     if ahead > limit:
         return False
     graph, ws, scratch, uturn_cost_m, table = routing
-    _, _, _, dist, _, _ = _pair_routes(
+    _, _, _, dist, _, _, _ = _pair_routes(
         graph, ws, scratch, uturn_cost_m, table,
         np.array([edge]), np.array([front_edge]), np.array([limit - ahead]),
     )  # fmt: skip

@@ -54,12 +54,7 @@ from mapmatch.hmm.routes import (
     held_behind,
     uturn_route,
 )
-from roadnets.route_search import (
-    gather,
-    route_pairs_kernel,
-    table_records,
-    within_search_bounds,
-)
+from roadnets.route_search import route_pairs_kernel, table_routes
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -294,7 +289,9 @@ def _pair_routes(graph, ws, scratch, uturn_cost_m, table, from_edge, to_edge, bo
 
     Returns whether the table answered, the searches' output of
     :func:`~roadnets.route_search.route_pairs_kernel` (empty then) and per pair its record,
-    length, time and U-turns.
+    length, time, U-turns and the edge it drives onto its target edge from: the route's last
+    edge before the target, ``from_edge`` when the target follows at once,
+    :data:`~mapmatch.hmm.routes.ARRIVAL_UNKNOWN` without a route.
     """
     t_bound, t_sources, t_ptr, t_state, t_index, t_dist, t_time, t_turns, copy_ptr, copy_state = (
         table[:10]
@@ -302,48 +299,30 @@ def _pair_routes(graph, ws, scratch, uturn_cost_m, table, from_edge, to_edge, bo
     fits = t_bound > -np.inf  # no table (bound -inf) never fits, even with no pairs
     for k in range(len(bounds)):
         fits = fits and bounds[k] <= t_bound
+    state_edge = graph[2]
     if fits:
-        rec = within_search_bounds(
-            table_records(
-                t_sources, t_ptr, t_state, t_index, copy_ptr, copy_state, from_edge, to_edge
-            ),
-            from_edge, bounds, uturn_cost_m, t_dist, t_turns, scratch[0],
-        )  # fmt: skip
-        dist, time, turns = gather(rec, t_dist, t_time, t_turns)
+        columns = (t_sources, t_ptr, t_state, t_index, t_dist, t_time, t_turns, table[10],
+                   copy_ptr, copy_state)  # fmt: skip
+        rec, dist, time, turns, arrival = table_routes(
+            columns, state_edge, from_edge, to_edge, bounds, uturn_cost_m, scratch[0]
+        )
         e_i, e_f = np.empty(0, dtype=np.int64), np.empty(0)
         searched = (
             e_i, e_f, e_i, np.empty(0, dtype=np.int32), e_f, e_f, np.empty(0, dtype=np.int16),
             e_i, e_i, e_i, e_i,
         )  # fmt: skip
-        return True, searched, rec, dist, time, turns
+        return True, searched, rec, dist, time, turns, arrival
     out = route_pairs_kernel(graph, from_edge, to_edge, bounds, uturn_cost_m, ws, scratch)
     searched = out[:11]
-    return False, searched, out[11], out[12], out[13], out[14]
-
-
-@njit(cache=True, nogil=True)
-def _arrivals_of(rec, pred, state, state_edge, from_edge):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """Per route record, the edge before its target: ``from_edge`` when it follows at once."""
-    out = np.full(len(rec), ARRIVAL_UNKNOWN, dtype=np.int64)
+    rec = out[11]
+    arrival = np.full(len(rec), ARRIVAL_UNKNOWN, dtype=np.int64)
+    pred, state = searched[7], searched[3]
     for k in range(len(rec)):
         r = rec[k]
         if r >= 0:
             p = pred[r]
-            out[k] = from_edge[k] if p < 0 else state_edge[state[p]]
-    return out
-
-
-@njit(cache=True, nogil=True)
-def route_arrivals(fits, searched, rec, table, state_edge, from_edge):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """
-    The edge each route of :func:`_pair_routes` drives onto its target edge from.
-
-    The route's last edge before the target, or its source edge when the target follows it
-    directly; :data:`~mapmatch.hmm.routes.ARRIVAL_UNKNOWN` where there is no route.
-    """
-    if fits:
-        return _arrivals_of(rec, table[10], table[3], state_edge, from_edge)
-    return _arrivals_of(rec, searched[7], searched[3], state_edge, from_edge)
+            arrival[k] = from_edge[k] if p < 0 else state_edge[state[p]]
+    return False, searched, rec, out[12], out[13], out[14], arrival
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -400,7 +379,7 @@ def transitions_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - co
     n = len(a)
     ea, eb = c_edge[a], c_edge[b]
     oa, ob = c_off[a], c_off[b]
-    fits, searched, rec, r_dist, r_time, r_turns = _pair_routes(
+    fits, searched, rec, r_dist, r_time, r_turns, move_arrival = _pair_routes(
         graph, ws, scratch, uturn_cost_m, table, ea, eb, bounds
     )
     lt = np.empty(n)
@@ -468,7 +447,6 @@ def transitions_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - co
     # held car only where the car arrived on b's edge, which the Viterbi pass checks against
     # the state's own arrival (elsewhere the move is what the pair scores)
     moved = lt.copy()
-    move_arrival = route_arrivals(fits, searched, rec, table, graph[2], ea)
     for k in range(n):
         if kind[k] == ROUTE_SAME_EDGE:
             move_arrival[k] = ARRIVAL_SAME
@@ -479,7 +457,7 @@ def transitions_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - co
     # holding still: b a little behind a, on its edge or across edges
     back, near = held_behind(ea, eb, oa, ob, c_x[a], c_y[a], c_x[b], c_y[b], tolerance)
     if len(near):
-        _, _, _, dist_back, _, _ = _pair_routes(
+        _, _, _, dist_back, _, _, _ = _pair_routes(
             graph, ws, scratch, uturn_cost_m, table, eb[near], ea[near], tolerance[near]
         )
         held_across(back, near, ea, eb, oa, ob, edge_len, dist_back, tolerance)

@@ -14,7 +14,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import roadnets
-from roadnets.routes import route_pairs, route_table
+from roadnets.route_search import gather, table_records, table_routes, within_search_bounds
+from roadnets.routes import DEFAULT_UTURN_COST_M, route_pairs, route_table, scratch
 from roadnets.routing import shortest_path_table
 from roadnets.turns import build_turn_graph
 
@@ -274,6 +275,58 @@ def test_a_precomputed_route_table_answers_as_the_searches_when_bounds_and_cost_
         assert answered.edges(*pair) == fresh.edges(*pair)
     finally:
         oakland_net.precomputed_routes = None
+
+
+@pytest.mark.parametrize("runs", [True, False], ids=["runs of one source", "any order"])
+def test_the_one_pass_table_look_up_answers_as_the_four_passes_and_the_routes(
+    restricted_net: roadnets.RoadNetwork, runs: bool
+) -> None:
+    net = restricted_net
+    a, turns = net.arrays, net.turns
+    rng = np.random.default_rng(11)
+    from_edges = rng.integers(0, a.n_edges, 400)
+    if runs:  # as the matcher asks: each source's targets together
+        from_edges = np.repeat(from_edges[:50], 8)
+    to_edges = rng.integers(0, a.n_edges, len(from_edges))
+    near = rng.random(len(from_edges)) < 0.5  # half of them close by, so that routes exist
+    to_edges[near] = a.edge_twin[from_edges[near]].clip(0)
+    to_edges[::7] = from_edges[::7]
+    bounds = rng.uniform(0.0, 600.0, len(from_edges))
+    previous = net.precomputed_routes
+    try:
+        table = net.precompute_routes(600.0)
+        slot = scratch(a, turns)[1][0]
+        index = table.index()
+        columns = (
+            table.sources, table.ptr, table.state, index, table.distance_m, table.time_s,
+            table.uturns, table.pred, turns.copy_ptr, turns.copy_state,
+        )  # fmt: skip
+        rec, dist, time, uturns, arrival = table_routes(
+            columns, turns.state_edge, from_edges, to_edges, bounds, DEFAULT_UTURN_COST_M, slot
+        )
+        assert (slot == -1).all()  # the scratch is left clean for the next caller
+        four = table_records(table.sources, table.ptr, table.state, index, turns.copy_ptr,
+                             turns.copy_state, from_edges, to_edges)  # fmt: skip
+        four = within_search_bounds(
+            four, from_edges, bounds, DEFAULT_UTURN_COST_M, table.distance_m, table.uturns, slot
+        )
+        assert np.array_equal(rec, four)
+        gathered = gather(four, table.distance_m, table.time_s, table.uturns)
+        for got, want in zip((dist, time, uturns), gathered, strict=True):
+            assert np.array_equal(got, want)
+        # as the searches with these bounds find them, and each arrives on its target from
+        # the route's last edge before it (its source when the target follows at once)
+        routes = net.edge_routes(from_edges, to_edges, bounds)
+        assert np.array_equal(np.isfinite(dist), np.isfinite(routes.distance_m))
+        found = np.flatnonzero(rec >= 0)
+        assert len(found) > 50
+        assert np.allclose(dist[found], routes.distance_m[found])
+        for i in found.tolist():
+            path = routes.edges(int(from_edges[i]), int(to_edges[i]))
+            assert arrival[i] == (path[-1] if path else from_edges[i])
+        assert (arrival[rec < 0] == -1).all()
+    finally:
+        net.precomputed_routes = previous
 
 
 def test_bad_arguments_are_named(oakland_net: roadnets.RoadNetwork) -> None:
