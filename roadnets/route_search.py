@@ -38,7 +38,6 @@ __all__ = [
     "search_many",
     "table_records",
     "table_routes",
-    "within_search_bounds",
 ]
 
 
@@ -423,38 +422,23 @@ def _clear_slots(from_edge, slot):  # type: ignore[no-untyped-def]  # pragma: no
 
 
 @njit(cache=True, nogil=True)
-def within_search_bounds(rec, from_edge, bounds, uturn_cost, distance, uturns, slot):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """
-    Table records of pairs, less those a search with these bounds would not have settled.
-
-    A search runs per distinct ``from`` edge with the largest bound of its pairs
-    (:func:`group_pairs`) and settles a state when its key (length plus U-turn costs) fits,
-    so a record of a complete table counts only within that bound: the table then answers
-    exactly what the searches would. ``slot`` is :func:`group_pairs`' first scratch array
-    (-1 throughout, left so).
-    """
-    largest = _largest_bounds(from_edge, bounds, slot)
-    out = rec.copy()
-    for i in range(len(rec)):
-        r = rec[i]
-        if r >= 0 and distance[r] + uturn_cost * uturns[r] > largest[slot[from_edge[i]]]:
-            out[i] = -1
-    _clear_slots(from_edge, slot)
-    return out
-
-
-@njit(cache=True, nogil=True)
 def table_routes(table, state_edge, from_edge, to_edge, bounds, uturn_cost, slot):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
     Routes of ``(from, to)`` edge pairs from a complete table, as bounded searches would find them.
 
-    :func:`table_records`, :func:`within_search_bounds` and :func:`gather` in one pass over
-    the pairs, and the edge each route drives onto its target edge from (its last edge
-    before the target, ``from`` itself when the target follows at once; -1 without a
-    route). One pass reads each record's columns together: 10-20 % less time than the four
-    passes on the matcher's pairs (which are memory-bound on the table). ``table`` is
-    ``(sources, ptr, state, index, distance, time, uturns, pred, copy_ptr, copy_state)``,
-    ``slot`` as for :func:`within_search_bounds`.
+    The record of each pair (:func:`table_records`), less those a search with these bounds
+    would not have settled: a search runs per distinct ``from`` edge with the largest bound of
+    its pairs (:func:`group_pairs`) and settles a state when its key (length plus U-turn
+    costs) fits, so a record of a complete table counts only within that bound, and the table
+    then answers exactly what the searches would. With each route its length, time and
+    U-turns (as :func:`gather`) and the edge it drives onto its target edge from (its last
+    edge before the target, ``from`` itself when the target follows at once; -1 without a
+    route), all in one pass that reads each record's columns together: 10-20 % less time than
+    a pass per step on the matcher's pairs, which are memory-bound on the table.
+
+    ``table`` is ``(sources, ptr, state, index, distance, time, uturns, pred, copy_ptr,
+    copy_state)`` (``index`` the table's :func:`~roadnets.record_index.record_index`);
+    ``slot`` is :func:`group_pairs`' first scratch array (-1 throughout, left so).
 
     Returns ``record, distance, time, uturns, arrival`` per pair (-1, ``inf``, ``inf``, 0,
     -1 where there is none).

@@ -48,7 +48,7 @@ from roadnets.route_search import (
     route_pairs_kernel,
     search_many,
     table_records,
-    within_search_bounds,
+    table_routes,
 )
 from roadnets.turns import DEFAULT_UTURN_COST_M
 
@@ -503,16 +503,20 @@ def route_pairs(
         raise ValueError(msg)
     bounds = np.broadcast_to(np.asarray(bounds_m, dtype=np.float64), a.shape)
     if table is not None:
-        rec = within_search_bounds(
-            table.records(a, b),
+        columns = (
+            table.sources, table.ptr, table.state, table.index(), table.distance_m,
+            table.time_s, table.uturns, table.pred, turns.copy_ptr, turns.copy_state,
+        )  # fmt: skip
+        rec, dist, time, uturns, _ = table_routes(
+            columns,
+            turns.state_edge,
             a,
+            b,
             np.ascontiguousarray(bounds),
             table.uturn_cost_m,
-            table.distance_m,
-            table.uturns,
             scratch(arrays, turns)[1][0],
         )
-        return EdgeRoutes(a, b, *_gather(table, rec), rec, table)
+        return EdgeRoutes(a, b, dist, time, uturns, rec, table)
     cost = (uturn_cost_m, edge_cost, turn_cost)
     graph, uturn = _search_arrays(arrays, turns, cost)
     out = route_pairs_kernel(

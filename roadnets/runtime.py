@@ -99,7 +99,7 @@ def _dispatchers() -> list[object]:
         route_search.route_pairs_kernel,
         route_search.table_records,
         route_search.gather,
-        route_search.within_search_bounds,
+        route_search.table_routes,
         spatial_kernels.nearby_kernel,
         spatial_kernels.path_polyline_kernel,
         spatial_kernels.path_lonlat_kernel,

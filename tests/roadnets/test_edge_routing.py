@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import roadnets
-from roadnets.route_search import gather, table_records, table_routes, within_search_bounds
+from roadnets.route_search import gather, table_records, table_routes
 from roadnets.routes import DEFAULT_UTURN_COST_M, route_pairs, route_table, scratch
 from roadnets.routing import shortest_path_table
 from roadnets.turns import build_turn_graph
@@ -278,7 +278,7 @@ def test_a_precomputed_route_table_answers_as_the_searches_when_bounds_and_cost_
 
 
 @pytest.mark.parametrize("runs", [True, False], ids=["runs of one source", "any order"])
-def test_the_one_pass_table_look_up_answers_as_the_four_passes_and_the_routes(
+def test_the_one_pass_table_look_up_answers_as_its_steps_and_the_searches(
     restricted_net: roadnets.RoadNetwork, runs: bool
 ) -> None:
     net = restricted_net
@@ -294,6 +294,9 @@ def test_the_one_pass_table_look_up_answers_as_the_four_passes_and_the_routes(
     bounds = rng.uniform(0.0, 600.0, len(from_edges))
     previous = net.precomputed_routes
     try:
+        net.precomputed_routes = None
+        routes = net.edge_routes(from_edges, to_edges, bounds)  # searched
+        assert routes.targets is not None
         table = net.precompute_routes(600.0)
         slot = scratch(a, turns)[1][0]
         index = table.index()
@@ -307,16 +310,17 @@ def test_the_one_pass_table_look_up_answers_as_the_four_passes_and_the_routes(
         assert (slot == -1).all()  # the scratch is left clean for the next caller
         four = table_records(table.sources, table.ptr, table.state, index, turns.copy_ptr,
                              turns.copy_state, from_edges, to_edges)  # fmt: skip
-        four = within_search_bounds(
-            four, from_edges, bounds, DEFAULT_UTURN_COST_M, table.distance_m, table.uturns, slot
-        )
+        # a record counts within the largest bound of its source's pairs (one search each)
+        largest = {int(e): float(bounds[from_edges == e].max()) for e in np.unique(from_edges)}
+        key = table.distance_m[four] + DEFAULT_UTURN_COST_M * table.uturns[four]
+        beyond = key > np.array([largest[int(e)] for e in from_edges])
+        four[(four >= 0) & beyond] = -1
         assert np.array_equal(rec, four)
         gathered = gather(four, table.distance_m, table.time_s, table.uturns)
         for got, want in zip((dist, time, uturns), gathered, strict=True):
             assert np.array_equal(got, want)
         # as the searches with these bounds find them, and each arrives on its target from
         # the route's last edge before it (its source when the target follows at once)
-        routes = net.edge_routes(from_edges, to_edges, bounds)
         assert np.array_equal(np.isfinite(dist), np.isfinite(routes.distance_m))
         found = np.flatnonzero(rec >= 0)
         assert len(found) > 50
@@ -325,6 +329,11 @@ def test_the_one_pass_table_look_up_answers_as_the_four_passes_and_the_routes(
             path = routes.edges(int(from_edges[i]), int(to_edges[i]))
             assert arrival[i] == (path[-1] if path else from_edges[i])
         assert (arrival[rec < 0] == -1).all()
+        # and what the network answers from the table is the same
+        answered = net.edge_routes(from_edges, to_edges, bounds)
+        assert answered.table is table
+        assert np.array_equal(answered.distance_m, dist)
+        assert np.array_equal(answered.uturns, uturns)
     finally:
         net.precomputed_routes = previous
 
