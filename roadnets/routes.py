@@ -123,6 +123,19 @@ class RouteTable:
         default_factory=list, init=False, repr=False, compare=False
     )
 
+    def lookup_columns(self) -> tuple[Any, ...]:
+        """
+        The table's columns as :func:`~roadnets.route_search.table_routes` reads them.
+
+        ``(sources, ptr, state, index, distance_m, time_s, uturns, pred, copy_ptr,
+        copy_state)``, the index made on first use (:meth:`index`), the restricted copies
+        from :attr:`turns`.
+        """
+        return (
+            self.sources, self.ptr, self.state, self.index(), self.distance_m, self.time_s,
+            self.uturns, self.pred, self.turns.copy_ptr, self.turns.copy_state,
+        )  # fmt: skip
+
     def records(self, from_edges: IndexArray, to_edges: IndexArray) -> IntArray:
         """
         Record of the best route for each ``(from, to)`` edge pair, -1 where the table has none.
@@ -503,12 +516,8 @@ def route_pairs(
         raise ValueError(msg)
     bounds = np.broadcast_to(np.asarray(bounds_m, dtype=np.float64), a.shape)
     if table is not None:
-        columns = (
-            table.sources, table.ptr, table.state, table.index(), table.distance_m,
-            table.time_s, table.uturns, table.pred, turns.copy_ptr, turns.copy_state,
-        )  # fmt: skip
         rec, dist, time, uturns, _ = table_routes(
-            columns,
+            table.lookup_columns(),
             turns.state_edge,
             a,
             b,

@@ -300,12 +300,14 @@ def test_the_one_pass_table_look_up_answers_as_its_steps_and_the_searches(
         table = net.precompute_routes(600.0)
         slot = scratch(a, turns)[1][0]
         index = table.index()
-        columns = (
-            table.sources, table.ptr, table.state, index, table.distance_m, table.time_s,
-            table.uturns, table.pred, turns.copy_ptr, turns.copy_state,
-        )  # fmt: skip
         rec, dist, time, uturns, arrival = table_routes(
-            columns, turns.state_edge, from_edges, to_edges, bounds, DEFAULT_UTURN_COST_M, slot
+            table.lookup_columns(),
+            turns.state_edge,
+            from_edges,
+            to_edges,
+            bounds,
+            DEFAULT_UTURN_COST_M,
+            slot,
         )
         assert (slot == -1).all()  # the scratch is left clean for the next caller
         four = table_records(table.sources, table.ptr, table.state, index, turns.copy_ptr,
