@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 
     IntArray = npt.NDArray[np.int64]
 
-__all__ = ["find_record", "record_index"]
+__all__ = ["find_record", "first_slot", "record_index"]
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # 2**64 over the golden ratio: Fibonacci hashing
 _HIGH = np.uint64(32)
@@ -87,13 +87,20 @@ def record_index(
 
 
 @njit(cache=True, nogil=True, inline="always")
+def first_slot(index_ptr, block, wanted):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """The slot state ``wanted`` is looked for in first in block ``block`` (``block >= 0``)."""
+    base = index_ptr[block]
+    return base + _home(wanted, index_ptr[block + 1] - base)
+
+
+@njit(cache=True, nogil=True, inline="always")
 def find_record(ptr, state, index_ptr, slots, block, wanted):  # type: ignore[no-untyped-def]  # pragma: no cover
     """Record of state ``wanted`` in block ``block`` (-1: no such record, or ``block < 0``)."""
     if block < 0:
         return -1
     base = index_ptr[block]
     capacity = index_ptr[block + 1] - base
-    h = _home(wanted, capacity)
+    h = first_slot(index_ptr, block, wanted) - base
     while True:  # a block's slots are never full (2 n + 1 of them): an empty one ends it
         place = np.int64(slots[base + h])
         if place == 0:

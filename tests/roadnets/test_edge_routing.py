@@ -278,7 +278,7 @@ def test_a_precomputed_route_table_answers_as_the_searches_when_bounds_and_cost_
 
 
 @pytest.mark.parametrize("runs", [True, False], ids=["runs of one source", "any order"])
-def test_the_one_pass_table_look_up_answers_as_its_steps_and_the_searches(
+def test_the_staged_table_look_up_answers_as_its_steps_and_the_searches(
     restricted_net: roadnets.RoadNetwork, runs: bool
 ) -> None:
     net = restricted_net
