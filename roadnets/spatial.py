@@ -343,6 +343,8 @@ def query_edges(
         Held around the R-tree probe: libspatialindex indexes must not be queried from two
         threads at once.
     """
+    from roadnets.spatial_kernels import bearings_kernel  # numba: imported when first needed
+
     x = np.asarray(x, dtype=np.float64)
     y = np.asarray(y, dtype=np.float64)
     radius = np.broadcast_to(np.asarray(radius_m, dtype=np.float64), x.shape)
@@ -369,7 +371,7 @@ def query_edges(
     keep = _nearest_places(point, edge, offset, dist)
     point, edge, offset = point[keep], edge[keep], offset[keep]
     dist, qx, qy = dist[keep], qx[keep], qy[keep]
-    bearing = np.degrees(np.arctan2(dx[keep], dy[keep])) % 360.0
+    dx, dy = dx[keep], dy[keep]
 
     twin = arrays.edge_twin[edge].astype(np.int64)
     has_twin = twin >= 0
@@ -380,7 +382,10 @@ def query_edges(
     offset = np.concatenate((offset, length - offset[has_twin]))
     qx = np.concatenate((qx, qx[has_twin]))
     qy = np.concatenate((qy, qy[has_twin]))
-    bearing = np.concatenate((bearing, (bearing[has_twin] + 180.0) % 360.0))
+    reverse = np.concatenate((np.zeros(len(dx), dtype=bool), np.ones(len(length), dtype=bool)))
+    bearing = bearings_kernel(
+        np.concatenate((dx, dx[has_twin])), np.concatenate((dy, dy[has_twin])), reverse
+    )
 
     order = np.lexsort((edge, dist, point))
     if max_per_point is not None:
@@ -423,21 +428,9 @@ def query_packed(
 
     top = 0 if max_per_point is None else int(max_per_point)
     args = (*packed_arrays(tree, arrays), x, y, radius, top, PLACE_SEPARATION_M)
-    ptr, edge, dist, offset, qx, qy, dx, dy, twin = nearby_kernel(*args)
+    ptr, edge, dist, offset, qx, qy, bearing = nearby_kernel(*args)
     point = np.repeat(np.arange(len(x), dtype=np.int64), np.diff(ptr))
-    return EdgeHits(point, edge, dist, offset, qx, qy, bearings(dx, dy, twin))
-
-
-def bearings(dx: FloatArray, dy: FloatArray, twin: npt.NDArray[np.bool_]) -> FloatArray:
-    """
-    Direction of travel along segments ``(dx, dy)``, degrees clockwise from north.
-
-    Reversed where ``twin``. numpy's ``arctan2`` (vectorised, as :func:`query_edges` computes
-    it), not the compiled one: the two differ in the last bit for some angles.
-    """
-    bearing = np.degrees(np.arctan2(dx, dy)) % 360.0
-    bearing[twin] = (bearing[twin] + 180.0) % 360.0
-    return np.asarray(bearing, dtype=np.float64)
+    return EdgeHits(point, edge, dist, offset, qx, qy, bearing)
 
 
 def packed_arrays(tree: PackedTree, arrays: NetworkArrays) -> tuple[Any, ...]:

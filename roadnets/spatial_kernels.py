@@ -5,17 +5,46 @@ Separate from :mod:`roadnets.spatial` so that importing roadnets does not import
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
 from roadnets.tmerc import inverse_kernel
 
-__all__ = ["nearby_kernel", "path_polyline_kernel", "point_on_edge", "points_on_edges"]
+__all__ = [
+    "bearings_kernel",
+    "nearby_kernel",
+    "path_polyline_kernel",
+    "point_on_edge",
+    "points_on_edges",
+]
 
 
 #: How much a packed tree's probe box is widened, metres: a segment the exact distance test
 #: keeps is never missed by the box test because of rounding.
 _PROBE_PAD_M = 1e-6
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _bearing(dx, dy, reverse):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """Direction of travel along ``(dx, dy)`` (backwards if ``reverse``), degrees from north."""
+    bearing = math.degrees(math.atan2(dx, dy)) % 360.0
+    return (bearing + 180.0) % 360.0 if reverse else bearing
+
+
+@njit(cache=True, nogil=True)
+def bearings_kernel(dx, dy, reverse):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """
+    Direction of travel along segments ``(dx, dy)``, degrees clockwise from north.
+
+    Reversed where ``reverse``: the bearing :func:`nearby_kernel` gives each row, for
+    :func:`roadnets.spatial.query_edges`' rows, so that both queries agree to the bit.
+    """
+    out = np.empty(len(dx))
+    for k in range(len(dx)):
+        out[k] = _bearing(dx[k], dy[k], reverse[k])
+    return out
 
 
 @njit(cache=True, nogil=True)
@@ -87,10 +116,9 @@ def nearby_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compile
     of each edge (and any other one ``separation`` metres along it, as
     ``roadnets.spatial._nearest_places`` keeps them) stays, the reverse twin of each is
     added, and the rows are sorted by distance, then edge; at most ``max_per_point`` are
-    kept (``<= 0``: all). Returns ``(ptr, edge, distance, offset, x, y, dx, dy, twin)``,
-    the rows of point ``i`` at ``ptr[i]:ptr[i + 1]``: each row's segment direction
-    ``(dx, dy)`` and whether it is the reverse twin of the edge found, from which
-    :func:`roadnets.spatial.bearings` makes the bearing.
+    kept (``<= 0``: all). Returns ``(ptr, edge, distance, offset, x, y, bearing)``, the
+    rows of point ``i`` at ``ptr[i]:ptr[i + 1]``; ``bearing`` is the direction of travel on
+    the row's edge there, degrees clockwise from north.
     """
     n = len(x)
     ptr = np.zeros(n + 1, dtype=np.int64)
@@ -211,6 +239,9 @@ def nearby_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compile
                 out_f[count, c] = row_f[row, c]
             count += 1
         ptr[i + 1] = count
+    bearing = np.empty(count)
+    for k in range(count):
+        bearing[k] = _bearing(out_f[k, 4], out_f[k, 5], out_i[k, 1] == 1)
     return (
         ptr,
         out_i[:count, 0].copy(),
@@ -218,9 +249,7 @@ def nearby_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compile
         out_f[:count, 1].copy(),
         out_f[:count, 2].copy(),
         out_f[:count, 3].copy(),
-        out_f[:count, 4].copy(),
-        out_f[:count, 5].copy(),
-        out_i[:count, 1] == 1,
+        bearing,
     )
 
 

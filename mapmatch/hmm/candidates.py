@@ -9,7 +9,7 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from roadnets.spatial import PLACE_SEPARATION_M, bearings, packed_arrays
+from roadnets.spatial import PLACE_SEPARATION_M, packed_arrays
 from roadnets.spatial_kernels import nearby_kernel
 
 if TYPE_CHECKING:
@@ -205,5 +205,5 @@ def find_candidates(
         edges_searched(config),
         PLACE_SEPARATION_M,
     )
-    ptr, edge, dist, offset, qx, qy, dx, dy, twin = nearby_kernel(*args)
-    return Candidates(ptr, edge, offset, dist, qx, qy, bearings(dx, dy, twin))
+    ptr, edge, dist, offset, qx, qy, bearing = nearby_kernel(*args)
+    return Candidates(ptr, edge, offset, dist, qx, qy, bearing)
