@@ -358,7 +358,8 @@ def query_edges(
         t = np.where(seg_len2 > 0, ((px - ax) * dx + (py - ay) * dy) / seg_len2, 0.0)
     t = np.clip(t, 0.0, 1.0)
     qx, qy = ax + t * dx, ay + t * dy
-    dist = np.hypot(px - qx, py - qy)
+    ex, ey = px - qx, py - qy
+    dist = np.sqrt(ex * ex + ey * ey)  # as nearby_kernel works it out, to the bit
     near = dist <= radius[point]
     point, seg, dist, t, qx, qy = point[near], seg[near], dist[near], t[near], qx[near], qy[near]
     dx, dy, start = dx[near], dy[near], start[near]

@@ -87,7 +87,8 @@ def project_kernel(px, py, lo, hi, vx, vy, va):  # type: ignore[no-untyped-def] 
             a = min(max(a, lo[i]), hi[i])
             f = (a - va[k]) / seg if seg > 0 else 0.0
             qx, qy = ax + f * dx, ay + f * dy
-            d = np.hypot(px[i] - qx, py[i] - qy)
+            ex, ey = px[i] - qx, py[i] - qy
+            d = np.sqrt(ex * ex + ey * ey)  # not hypot: a libm call, slower than the rest
             if d < best_d:
                 best_d = d
                 best_a = a

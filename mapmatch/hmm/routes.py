@@ -286,7 +286,9 @@ def held_behind(ea, eb, oa, ob, ax, ay, bx, by, tolerance):  # type: ignore[no-u
         if ea[k] == eb[k]:
             if ob[k] <= oa[k] and oa[k] - ob[k] <= tolerance[k]:
                 back[k] = oa[k] - ob[k]
-        elif np.hypot(ax[k] - bx[k], ay[k] - by[k]) <= tolerance[k]:
+            continue
+        dx, dy = ax[k] - bx[k], ay[k] - by[k]
+        if dx * dx + dy * dy <= tolerance[k] * tolerance[k]:  # every pair: no libm hypot
             near[m] = k
             m += 1
     return back, near[:m]
