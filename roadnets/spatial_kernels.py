@@ -28,9 +28,20 @@ _PROBE_PAD_M = 1e-6
 
 @njit(cache=True, nogil=True, inline="always")
 def _bearing(dx, dy, reverse):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    """Direction of travel along ``(dx, dy)`` (backwards if ``reverse``), degrees from north."""
-    bearing = math.degrees(math.atan2(dx, dy)) % 360.0
-    return (bearing + 180.0) % 360.0 if reverse else bearing
+    """
+    Direction of travel along ``(dx, dy)`` (backwards if ``reverse``), degrees from north.
+
+    Python's ``% 360.0`` to the bit without its C call: on ``(-180, 180]`` that is the value
+    (``+0.0`` for ``-0.0``) or, below zero, the value plus 360; on ``[180, 540)``, minus 360
+    past 360 (exact there).
+    """
+    bearing = math.degrees(math.atan2(dx, dy))
+    bearing = bearing + 360.0 if bearing < 0.0 else bearing + 0.0  # + 0.0: -0.0 becomes 0.0
+    if reverse:
+        bearing += 180.0
+        if bearing >= 360.0:
+            bearing -= 360.0
+    return bearing
 
 
 @njit(cache=True, nogil=True)

@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -296,3 +297,22 @@ def test_points_on_edges_are_the_vectorised_interpolation(
     assert np.isnan(x[100:110]).all()
     with pytest.raises(IndexError, match="out of range"):
         melbourne_net.point_on_edge(np.array([a.n_edges]), np.array([0.0]))
+
+
+def test_the_compiled_bearing_is_pythons_modulo_to_the_bit() -> None:
+    from roadnets.spatial_kernels import bearings_kernel
+
+    rng = np.random.default_rng(5)
+    tiny = [0.0, -0.0, 5e-324, -5e-324, 1e-300, -1e-300, 1.0, -1.0, 1e300, -1e300]
+    pairs = [(a, b) for a in tiny for b in tiny]
+    dx = np.concatenate((rng.normal(size=4000) * 100, [a for a, _ in pairs] * 2))
+    dy = np.concatenate((rng.normal(size=4000) * 100, [b for _, b in pairs] * 2))
+    reverse = np.concatenate(
+        (rng.random(4000) < 0.5, np.zeros(len(pairs), bool), np.ones(len(pairs), bool))
+    )
+    forward = [math.degrees(math.atan2(a, b)) % 360.0 for a, b in zip(dx, dy, strict=True)]
+    want = np.array(
+        [(f + 180.0) % 360.0 if r else f for f, r in zip(forward, reverse, strict=True)]
+    )
+    got = bearings_kernel(dx, dy, reverse)
+    assert np.array_equal(got.view(np.int64), want.view(np.int64))  # -0.0 is not 0.0 here
