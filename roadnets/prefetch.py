@@ -5,7 +5,7 @@ A kernel that reads scattered items of a large array (a route table's records, o
 of candidates) waits on each load in turn when each address comes out of the load before it.
 Asking for the loads of many items first (:func:`prefetch`), then reading them, lets the
 memory answer them together: on the matcher's pairs, read right after another trace's match
-(the table no longer in the caches), a fifth less time.
+(the table no longer in the caches), 13-21 % less time.
 """
 
 from __future__ import annotations
