@@ -100,7 +100,6 @@ def _dispatchers() -> list[object]:
         route_search.table_records,
         route_search.gather,
         route_search.table_routes,
-        spatial_kernels.bearings_kernel,
         spatial_kernels.nearby_kernel,
         spatial_kernels.path_polyline_kernel,
         spatial_kernels.path_lonlat_kernel,
