@@ -8,11 +8,24 @@ from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
+from numba import njit
+
+from mapmatch._sums import pairwise_sum
 
 if TYPE_CHECKING:
     from mapmatch.types import BoolArray, FloatArray
 
-__all__ = ["END_OUTLIERS", "DistanceCheck", "check_distance", "chord_length_m", "measured_span"]
+__all__ = [
+    "END_OUTLIERS",
+    "DistanceCheck",
+    "check_distance",
+    "chord_kernel",
+    "chord_length_m",
+    "measure_kernel",
+    "measured_chord",
+    "measured_span",
+    "span_kernel",
+]
 
 Verdict = Literal["pass", "over", "under", "incomplete"]
 Source = Literal["odometer", "caller", "chord"]
@@ -103,19 +116,48 @@ def measured_span(
     >>> measured_span(matched, np.zeros(4, dtype=bool), 1, None)
     (slice(None, None, None), False, None)
     """
-    whole = slice(None)
-    at = np.flatnonzero(matched)
-    if segments != 1 or not len(at):
-        return whole, False, odometer_m
-    first, last = int(at[0]), int(at[-1])
-    if first == 0 and last == len(matched) - 1:
-        return whole, True, odometer_m
-    head, tail = outlier[:first], outlier[last + 1 :]
-    ends_stray = len(head) <= END_OUTLIERS and len(tail) <= END_OUTLIERS
-    if ends_stray and bool(head.all()) and bool(tail.all()) and odometer_m is not None:
-        span = slice(first, last + 1)
-        return span, True, odometer_m[span]
-    return whole, False, odometer_m
+    lo, hi, complete = span_kernel(
+        np.ascontiguousarray(matched, np.bool_),
+        np.ascontiguousarray(outlier, np.bool_),
+        int(segments),
+        odometer_m is not None,
+    )
+    return _span_of(lo, hi, len(matched), complete, odometer_m)
+
+
+def _span_of(
+    lo: int, hi: int, n: int, complete: bool, odometer_m: FloatArray | None
+) -> tuple[slice, bool, FloatArray | None]:
+    """:func:`measured_span`'s answer from :func:`span_kernel`'s bounds."""
+    if lo == 0 and hi == n:
+        return slice(None), bool(complete), odometer_m
+    span = slice(int(lo), int(hi))
+    return span, bool(complete), None if odometer_m is None else odometer_m[span]
+
+
+@njit(cache=True, nogil=True)
+def span_kernel(matched, outlier, segments, has_odometer):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """:func:`measured_span` as bounds ``(lo, hi, complete)``; ``(0, n, ...)``: the whole trace."""
+    n = len(matched)
+    first, last = -1, -1
+    for i in range(n):
+        if matched[i]:
+            if first < 0:
+                first = i
+            last = i
+    if segments != 1 or first < 0:
+        return 0, n, False
+    if first == 0 and last == n - 1:
+        return 0, n, True
+    if first > END_OUTLIERS or n - 1 - last > END_OUTLIERS or not has_odometer:
+        return 0, n, False
+    for i in range(first):
+        if not outlier[i]:
+            return 0, n, False
+    for i in range(last + 1, n):
+        if not outlier[i]:
+            return 0, n, False
+    return first, last + 1, True
 
 
 def chord_length_m(x: FloatArray, y: FloatArray) -> float:
@@ -127,7 +169,53 @@ def chord_length_m(x: FloatArray, y: FloatArray) -> float:
     >>> chord_length_m(np.array([0.0, 3.0, 3.0]), np.array([0.0, 4.0, 8.0]))
     9.0
     """
-    return float(np.hypot(x[1:] - x[:-1], y[1:] - y[:-1]).sum())  # np.diff: 4x the cost
+    x = np.ascontiguousarray(x, np.float64)
+    return float(chord_kernel(x, np.ascontiguousarray(y, np.float64), 0, len(x)))
+
+
+@njit(cache=True, nogil=True)
+def chord_kernel(x, y, lo, hi):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """:func:`chord_length_m` of positions ``lo:hi``: ``np.hypot(dx, dy).sum()`` to the bit."""
+    steps = np.empty(max(hi - lo - 1, 0))
+    for i in range(len(steps)):
+        steps[i] = math.hypot(x[lo + i + 1] - x[lo + i], y[lo + i + 1] - y[lo + i])
+    return pairwise_sum(steps, 0, len(steps))
+
+
+@njit(cache=True, nogil=True)
+def measure_kernel(matched, outlier, segments, has_odometer, x, y):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """:func:`span_kernel`'s answer and the :func:`chord_kernel` length over it, one call."""
+    lo, hi, complete = span_kernel(matched, outlier, segments, has_odometer)
+    return lo, hi, complete, chord_kernel(x, y, lo, hi)
+
+
+def measured_chord(
+    matched: BoolArray,
+    outlier: BoolArray,
+    segments: int,
+    odometer_m: FloatArray | None,
+    x: FloatArray,
+    y: FloatArray,
+) -> tuple[bool, FloatArray | None, float]:
+    """
+    :func:`measured_span` and the :func:`chord_length_m` of the positions over that span.
+
+    Returns
+    -------
+    tuple
+        Whether the matched length covers the span, the odometer over it, and the chord
+        length over it in metres (one compiled call for a match's distance check).
+    """
+    lo, hi, complete, chord = measure_kernel(
+        np.ascontiguousarray(matched, np.bool_),
+        np.ascontiguousarray(outlier, np.bool_),
+        int(segments),
+        odometer_m is not None,
+        np.ascontiguousarray(x, np.float64),
+        np.ascontiguousarray(y, np.float64),
+    )
+    _, complete, odometer = _span_of(lo, hi, len(matched), complete, odometer_m)
+    return complete, odometer, float(chord)
 
 
 def check_distance(

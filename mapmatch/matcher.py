@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from mapmatch.config import MatchConfig
-from mapmatch.distance import Evidence, check_distance, chord_length_m, measured_span
+from mapmatch.distance import Evidence, check_distance, measured_chord
 from mapmatch.errors import DeadlineExceededError, NoCandidatesError
 from mapmatch.hmm.assemble import assemble
 from mapmatch.hmm.detours import drop_detour_fixes
@@ -171,8 +171,8 @@ def match(
         net, assembled.segments, assembled.points, trace.odometer_m, config, fixes.radius_m, (x, y)
     )
     matched_length = float(sum(s.length_m for s in segments))
-    span, complete, odometer = measured_span(
-        points.matched, points.outlier, len(segments), trace.odometer_m
+    complete, odometer, chord = measured_chord(
+        points.matched, points.outlier, len(segments), trace.odometer_m, x, y
     )
     check = check_distance(
         trace_id=trace.trace_id,
@@ -181,7 +181,7 @@ def match(
         band=config.distance_band,
         odometer_m=odometer,
         fused_distance_m=fused_distance_m,
-        chord_m=chord_length_m(x[span], y[span]),
+        chord_m=chord,
         evidence=_evidence(trace, fixes, config),
         uturns=_uturns(net, segments),
     )

@@ -45,7 +45,8 @@ class Fixes:
     A trace's fixes in metres with the per-fix model inputs.
 
     ``time_s`` is NaN throughout when the trace has no usable times; ``speed_mps`` the
-    reported speed, else one estimated from positions and times (NaN when neither is known).
+    reported speed, else one estimated from positions and times (NaN when neither is known);
+    ``sigma_max_m`` the largest ``sigma_m``.
     """
 
     x: FloatArray
@@ -57,6 +58,7 @@ class Fixes:
     heading_deg: FloatArray | None
     travel: Travel | None
     segment_starts: IntArray
+    sigma_max_m: float
 
 
 def fixes_of(trace: Trace, x: FloatArray, y: FloatArray, config: MatchConfig) -> Fixes:
@@ -68,7 +70,7 @@ def fixes_of(trace: Trace, x: FloatArray, y: FloatArray, config: MatchConfig) ->
     time_s = trace.time_s if trace.has_time else np.full(n, np.nan)
     reported = trace.speed_mps
     travel_on = config.use_travel and (trace.odometer_m is not None or reported is not None)
-    sigma, radius, speed, speed_m, slack_m, unknown = _fixes_kernel(
+    sigma, sigma_max, radius, speed, speed_m, slack_m, unknown = _fixes_kernel(
         np.ascontiguousarray(x, f8),
         np.ascontiguousarray(y, f8),
         np.ascontiguousarray(time_s, f8),
@@ -102,6 +104,7 @@ def fixes_of(trace: Trace, x: FloatArray, y: FloatArray, config: MatchConfig) ->
         trace.heading_deg,
         travel,
         np.asarray(trace.segment_starts, dtype=np.int64),
+        float(sigma_max),
     )
 
 
@@ -110,7 +113,7 @@ def _fixes_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compile
     x, y, time_s, accuracy, reported, integrate, sigma_m, radius_m, factor, max_radius, accel, tol
 ):
     """
-    Sigma, search radius and estimated speed of every fix, and the speed integral.
+    Sigma (and the largest), search radius and speed of every fix, and the speed integral.
 
     What :func:`search_radii`, :func:`speed_from_positions` and :func:`reported_travel` give,
     in one call; ``accuracy`` and ``reported`` are empty when the trace has no such column.
@@ -130,7 +133,7 @@ def _fixes_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compile
         speed_m, slack_m, unknown = _integrate(reported, dt, accel, tol)
     else:
         speed_m, slack_m, unknown = np.empty(0), np.empty(0), np.empty(0, dtype=np.int64)
-    return sigma, radius, speed, speed_m, slack_m, unknown
+    return sigma, sigma.max() if n else np.nan, radius, speed, speed_m, slack_m, unknown
 
 
 @njit(cache=True, nogil=True)
@@ -293,9 +296,10 @@ def with_sigma(fixes: Fixes, sigma_m: float, config: MatchConfig) -> Fixes:
         fixes,
         sigma_m=np.fmax(fixes.sigma_m, sigma_m),
         radius_m=np.fmax(fixes.radius_m, wide),
+        sigma_max_m=float(np.fmax(fixes.sigma_max_m, sigma_m)),
     )
 
 
 def hold_limit_m(fixes: Fixes, config: MatchConfig) -> float:
     """How far behind the path's front a fix may scatter and still be a held car's."""
-    return float(max(config.standstill_m, config.standstill_sigmas * fixes.sigma_m.max()))
+    return float(max(config.standstill_m, config.standstill_sigmas * fixes.sigma_max_m))

@@ -7,7 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from mapmatch.distance import END_OUTLIERS, check_distance, chord_length_m, measured_span
+from mapmatch.distance import (
+    END_OUTLIERS,
+    check_distance,
+    chord_length_m,
+    measured_chord,
+    measured_span,
+)
 
 BAND = (-0.04, 0.01)
 
@@ -99,3 +105,46 @@ def test_an_outlier_at_an_end_leaves_the_span_complete_a_stretch_off_road_does_n
     assert measured_span(many, ~many, 1, np.arange(5.0))[:2] == (slice(None), False)
     whole = measured_span(np.ones(3, dtype=bool), np.zeros(3, dtype=bool), 1, None)
     assert whole == (slice(None), True, None)
+
+
+def _span_as_numpy_finds_it(
+    matched: np.ndarray, outlier: np.ndarray, segments: int, odometer: np.ndarray | None
+) -> tuple[slice, bool]:
+    """The span of the fixes the check compares, written with numpy (what the kernel must do)."""
+    at = np.flatnonzero(matched)
+    if segments != 1 or not len(at):
+        return slice(None), False
+    first, last = int(at[0]), int(at[-1])
+    if first == 0 and last == len(matched) - 1:
+        return slice(None), True
+    head, tail = outlier[:first], outlier[last + 1 :]
+    few = len(head) <= END_OUTLIERS and len(tail) <= END_OUTLIERS
+    if few and head.all() and tail.all() and odometer is not None:
+        return slice(first, last + 1), True
+    return slice(None), False
+
+
+def test_the_compiled_span_and_chord_agree_with_numpy_to_the_bit() -> None:
+    rng = np.random.default_rng(51)
+    for trial in range(400):
+        n = int(rng.integers(0, 300)) if trial % 4 else int(rng.integers(0, 9))
+        x, y = rng.normal(0, 500, n), rng.normal(0, 500, n)
+        # chord: np.sum adds pairwise, so a plain running sum would differ in the last bit
+        assert chord_length_m(x, y) == float(np.hypot(np.diff(x), np.diff(y)).sum())
+        matched = rng.random(n) < rng.choice([0.5, 0.95, 1.0])
+        outlier = ~matched & (rng.random(n) < 0.9)
+        odometer = None if trial % 3 == 0 else np.arange(n) * 10.0
+        segments = int(rng.choice([1, 1, 1, 2]))
+        span, complete = _span_as_numpy_finds_it(matched, outlier, segments, odometer)
+        got = measured_span(matched, outlier, segments, odometer)
+        assert got[:2] == (span, complete)
+        assert (got[2] is None) == (odometer is None)
+        if odometer is not None:
+            assert np.array_equal(got[2], odometer[span])
+        together = measured_chord(matched, outlier, segments, odometer, x, y)
+        chord = float(np.hypot(np.diff(x[span]), np.diff(y[span])).sum())
+        assert together[0] == complete
+        assert together[2] == chord
+        assert (together[1] is None) == (odometer is None)
+        if odometer is not None:
+            assert np.array_equal(together[1], odometer[span])

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 import mapmatch
+from mapmatch._sums import pairwise_sum
 from mapmatch.evaluation.simulate import SimulationConfig, simulate_trips, strip_to_class
-from mapmatch.hmm.loops import pairwise_sum
 
 if TYPE_CHECKING:
     import roadnets
