@@ -20,7 +20,7 @@ import numpy as np
 from mapmatch.config import MatchConfig
 from mapmatch.distance import Evidence, check_distance, measured_chord
 from mapmatch.errors import DeadlineExceededError, NoCandidatesError
-from mapmatch.hmm.assemble import assemble
+from mapmatch.hmm.assemble import assemble, path_uturns
 from mapmatch.hmm.detours import drop_detour_fixes
 from mapmatch.hmm.ends import odometer_ends
 from mapmatch.hmm.fixes import (
@@ -183,7 +183,7 @@ def match(
         fused_distance_m=fused_distance_m,
         chord_m=chord,
         evidence=_evidence(trace, fixes, config),
-        uturns=_uturns(net, segments),
+        uturns=assembled.uturns,  # moving the ends by the odometer keeps every edge
     )
     _lap(timings, "result", clock)
     timings["total"] = sum(timings.values())
@@ -245,11 +245,7 @@ def _evidence(trace: Trace, fixes: Fixes, config: MatchConfig) -> Evidence:
 def _uturns(net: RoadNetwork, segments: list[Segment]) -> int:
     """U-turns on the matched path: an edge followed by its reverse, at a node or mid-road."""
     twin = net.arrays.edge_twin
-    total = 0
-    for segment in segments:
-        edges = segment.edge
-        total += int(np.count_nonzero(twin[edges[:-1]] == edges[1:]))
-    return total
+    return sum(int(path_uturns(twin, s.edge, 0, len(s.edge))) for s in segments)
 
 
 def _diagnostics(net: RoadNetwork, obs: Observations, solution: Solution) -> Diagnostics:

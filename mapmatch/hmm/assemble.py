@@ -40,7 +40,7 @@ if TYPE_CHECKING:
     from mapmatch.types import BoolArray, FloatArray
     from roadnets import RoadNetwork
 
-__all__ = ["Assembled", "assemble", "fixes_on_piece"]
+__all__ = ["Assembled", "assemble", "fixes_on_piece", "path_uturns"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -51,6 +51,17 @@ class Assembled:
     points: MatchedPoints
     jumps: int  # moves that could not continue from the path's front (drawn as a jump)
     loops: int  # loops the fixes did not support, taken out
+    uturns: int  # U-turns on the segments' paths (:func:`path_uturns`)
+
+
+@njit(cache=True, nogil=True)
+def path_uturns(edge_twin, edge, lo, hi):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """U-turns on the path ``edge[lo:hi]``: an edge followed by its reverse (node or mid-road)."""
+    count = 0
+    for k in range(lo, hi - 1):
+        if edge_twin[edge[k]] == edge[k + 1]:
+            count += 1
+    return count
 
 
 @njit(cache=True, nogil=True)
@@ -107,7 +118,11 @@ def _assemble_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - comp
         geom,
         ids,
     )
-    return placed, jumps.sum(), removed.sum()
+    t_ptr, t_edge = placed[0][0], placed[0][1]
+    uturns = 0
+    for p in range(len(t_ptr) - 1):
+        uturns += path_uturns(network.walk_net[4], t_edge, t_ptr[p], t_ptr[p + 1])
+    return placed, jumps.sum(), removed.sum(), uturns
 
 
 @njit(cache=True, nogil=True)
@@ -385,7 +400,7 @@ def assemble(
         (float(config.thinning_sigmas), float(config.standstill_m)),
         c.distance_m,
     )
-    placed, jumps, removed = _assemble_kernel(network_inputs(net), walk, place, loops)
+    placed, jumps, removed, uturns = _assemble_kernel(network_inputs(net), walk, place, loops)
     (t_ptr, t_edge, t_lo, t_hi), first_fix, last_fix, per_fix, flagged = placed
     matched, interpolated, edge, offset, confidence, segment_of, px, py, distance, u, v, key = (
         per_fix
@@ -419,4 +434,5 @@ def assemble(
         ),
         jumps=int(jumps),
         loops=int(removed),
+        uturns=int(uturns),
     )
