@@ -24,6 +24,7 @@ import numpy as np
 from numba import njit
 
 from mapmatch._jsontext import Packed
+from mapmatch._sums import path_length_m
 from mapmatch._timing import SegmentPaths, place_and_time_kernel, span_times, speeds_kph
 from roadnets.names_kernel import edge_records_kernel
 from roadnets.spatial_kernels import path_lonlat_kernel
@@ -114,16 +115,20 @@ def _lines(vertex_lon, vertex_lat, vertex_bounds):  # type: ignore[no-untyped-de
 
 
 @njit(cache=True, nogil=True)
-def _columns(paths, lengths, points, whole, real, vertices):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+def _columns(paths, points, whole, real, vertices):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     """
     Every feature column, packed (:data:`FLOAT_COLUMNS`, :data:`INT_COLUMNS`).
 
-    ``paths`` are :class:`~mapmatch._timing.SegmentPaths`' arrays, ``lengths`` each
-    segment's length, ``points`` the fixes' arrays, ``whole`` and ``real`` the edges' records
+    ``paths`` are :class:`~mapmatch._timing.SegmentPaths`' arrays (each segment's length
+    added from them as :attr:`~mapmatch.result.Segment.length_m` adds it), ``points`` the
+    fixes' arrays, ``whole`` and ``real`` the edges' records
     (:func:`~roadnets.names_kernel.edge_records_kernel`'s), ``vertices`` the segments' lines
     end to end and their bounds.
     """
     seg_index, first, last, bounds, seg_edge, start_m, end_m = paths
+    lengths = np.empty(len(seg_index))
+    for s in range(len(seg_index)):
+        lengths[s] = path_length_m(start_m, end_m, bounds[s], bounds[s + 1])
     (segment, matched, edge, offset_m, time_s, lon, lat, distance_m, confidence, u, v, key,
      interpolated, outlier) = points  # fmt: skip
     edge_index, along, times = place_and_time_kernel(
@@ -136,7 +141,7 @@ def _columns(paths, lengths, points, whole, real, vertices):  # type: ignore[no-
     floats, floats_at = _packed(
         (_real(time_s), _real(lon), _real(lat), _real(offset_m), _real(distance_m),
          _real(confidence), along,
-         _real(lengths), segment_start, segment_end,
+         lengths, segment_start, segment_end,
          _real(vertex_lon), _real(vertex_lat),
          _real(real[0]), _real(start_m), _real(end_m), _real(real[1]), entry, exit_, duration,
          speeds_kph(end_m - start_m, duration)),
@@ -154,7 +159,7 @@ def _columns(paths, lengths, points, whole, real, vertices):  # type: ignore[no-
 
 
 @njit(cache=True, nogil=True)
-def _from_network(paths, lengths, points, network):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+def _from_network(paths, points, network):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     """:func:`_columns`, the edges' records and the segments' lines read from ``network``."""
     records, names, geom, vertex_lonlat, inverse = network
     _, _, _, bounds, seg_edge, start_m, end_m = paths
@@ -175,13 +180,13 @@ def _from_network(paths, lengths, points, network):  # type: ignore[no-untyped-d
     for s in range(count):
         vertex_lon[vertex_bounds[s] : vertex_bounds[s + 1]] = lines[s][0]
         vertex_lat[vertex_bounds[s] : vertex_bounds[s + 1]] = lines[s][1]
-    return _columns(paths, lengths, points, whole, real, (vertex_lon, vertex_lat, vertex_bounds))
+    return _columns(paths, points, whole, real, (vertex_lon, vertex_lat, vertex_bounds))
 
 
 @njit(cache=True, nogil=True)
-def _from_segments(paths, lengths, points, whole, real, vertices):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+def _from_segments(paths, points, whole, real, vertices):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     """:func:`_columns` of records and lines already known."""
-    return _columns(paths, lengths, points, whole, real, vertices)
+    return _columns(paths, points, whole, real, vertices)
 
 
 def feature_columns(result: MatchResult) -> Packed:
@@ -203,7 +208,6 @@ def feature_columns(result: MatchResult) -> Packed:
     paths = SegmentPaths.of(segs)
     path_arrays = (paths.index, paths.first, paths.last, paths.bounds, paths.edge, paths.start_m,
                    paths.end_m)  # fmt: skip
-    lengths = np.array([s.length_m for s in segs], dtype=np.float64)
     p = result.points
     points = (
         p.segment, p.matched, p.edge, p.offset_m, p.time_s, p.lon, p.lat, p.distance_m,
@@ -213,11 +217,11 @@ def feature_columns(result: MatchResult) -> Packed:
     inputs = None if net is None else _network_inputs(net)
     if inputs is not None:
         text, network = inputs
-        floats, floats_at, ints, ints_at = _from_network(path_arrays, lengths, points, network)
+        floats, floats_at, ints, ints_at = _from_network(path_arrays, points, network)
     else:
         text, whole, real, vertices = _known(segs)
         floats, floats_at, ints, ints_at = _from_segments(
-            path_arrays, lengths, points, whole, real, vertices
+            path_arrays, points, whole, real, vertices
         )
     return Packed(floats, floats_at, ints, ints_at, text, FLOAT_COLUMNS, INT_COLUMNS, BOOL_COLUMNS)
 

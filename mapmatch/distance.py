@@ -8,9 +8,6 @@ from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
-from numba import njit
-
-from mapmatch._sums import pairwise_sum
 
 if TYPE_CHECKING:
     from mapmatch.types import BoolArray, FloatArray
@@ -19,12 +16,9 @@ __all__ = [
     "END_OUTLIERS",
     "DistanceCheck",
     "check_distance",
-    "chord_kernel",
     "chord_length_m",
-    "measure_kernel",
     "measured_chord",
     "measured_span",
-    "span_kernel",
 ]
 
 Verdict = Literal["pass", "over", "under", "incomplete"]
@@ -116,6 +110,8 @@ def measured_span(
     >>> measured_span(matched, np.zeros(4, dtype=bool), 1, None)
     (slice(None, None, None), False, None)
     """
+    from mapmatch._measure import span_kernel  # compiled: imported when first asked for
+
     lo, hi, complete = span_kernel(
         np.ascontiguousarray(matched, np.bool_),
         np.ascontiguousarray(outlier, np.bool_),
@@ -128,36 +124,11 @@ def measured_span(
 def _span_of(
     lo: int, hi: int, n: int, complete: bool, odometer_m: FloatArray | None
 ) -> tuple[slice, bool, FloatArray | None]:
-    """:func:`measured_span`'s answer from :func:`span_kernel`'s bounds."""
+    """:func:`measured_span`'s answer from the compiled span's bounds."""
     if lo == 0 and hi == n:
         return slice(None), bool(complete), odometer_m
     span = slice(int(lo), int(hi))
     return span, bool(complete), None if odometer_m is None else odometer_m[span]
-
-
-@njit(cache=True, nogil=True)
-def span_kernel(matched, outlier, segments, has_odometer):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    """:func:`measured_span` as bounds ``(lo, hi, complete)``; ``(0, n, ...)``: the whole trace."""
-    n = len(matched)
-    first, last = -1, -1
-    for i in range(n):
-        if matched[i]:
-            if first < 0:
-                first = i
-            last = i
-    if segments != 1 or first < 0:
-        return 0, n, False
-    if first == 0 and last == n - 1:
-        return 0, n, True
-    if first > END_OUTLIERS or n - 1 - last > END_OUTLIERS or not has_odometer:
-        return 0, n, False
-    for i in range(first):
-        if not outlier[i]:
-            return 0, n, False
-    for i in range(last + 1, n):
-        if not outlier[i]:
-            return 0, n, False
-    return first, last + 1, True
 
 
 def chord_length_m(x: FloatArray, y: FloatArray) -> float:
@@ -169,24 +140,10 @@ def chord_length_m(x: FloatArray, y: FloatArray) -> float:
     >>> chord_length_m(np.array([0.0, 3.0, 3.0]), np.array([0.0, 4.0, 8.0]))
     9.0
     """
+    from mapmatch._measure import chord_kernel  # compiled: imported when first asked for
+
     x = np.ascontiguousarray(x, np.float64)
     return float(chord_kernel(x, np.ascontiguousarray(y, np.float64), 0, len(x)))
-
-
-@njit(cache=True, nogil=True)
-def chord_kernel(x, y, lo, hi):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    """:func:`chord_length_m` of positions ``lo:hi``: ``np.hypot(dx, dy).sum()`` to the bit."""
-    steps = np.empty(max(hi - lo - 1, 0))
-    for i in range(len(steps)):
-        steps[i] = math.hypot(x[lo + i + 1] - x[lo + i], y[lo + i + 1] - y[lo + i])
-    return pairwise_sum(steps, 0, len(steps))
-
-
-@njit(cache=True, nogil=True)
-def measure_kernel(matched, outlier, segments, has_odometer, x, y):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    """:func:`span_kernel`'s answer and the :func:`chord_kernel` length over it, one call."""
-    lo, hi, complete = span_kernel(matched, outlier, segments, has_odometer)
-    return lo, hi, complete, chord_kernel(x, y, lo, hi)
 
 
 def measured_chord(
@@ -206,6 +163,8 @@ def measured_chord(
         Whether the matched length covers the span, the odometer over it, and the chord
         length over it in metres (one compiled call for a match's distance check).
     """
+    from mapmatch._measure import measure_kernel  # compiled: imported when first asked for
+
     lo, hi, complete, chord = measure_kernel(
         np.ascontiguousarray(matched, np.bool_),
         np.ascontiguousarray(outlier, np.bool_),

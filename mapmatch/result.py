@@ -252,7 +252,9 @@ class Segment:
     @property
     def length_m(self) -> float:
         """Metres along the path, from the first fix's place to the last's."""
-        return float(sum((self.end_offset_m - self.start_offset_m).tolist()))
+        from mapmatch._sums import path_length_m  # compiled: imported when first asked for
+
+        return float(path_length_m(self.start_offset_m, self.end_offset_m, 0, len(self.edge)))
 
     @property
     def driven_m(self) -> FloatArray:

@@ -101,10 +101,30 @@ def test_a_fresh_install_is_told_that_the_first_match_compiles(tmp_path: Path) -
         "print(kernels_on_disk())\n"
         "_announce_compile(); _announce_compile()\n"
     )
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
-    out = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120
-    )
+    out = _python(code, NUMBA_CACHE_DIR=str(tmp_path))
     lines = out.stdout.splitlines()
     assert lines[0] == "False", out.stderr
     assert sum("compiling the matcher's kernels" in line for line in lines) == 1
+
+
+def test_import_mapmatch_loads_no_compiler_and_no_heavy_library() -> None:
+    # `import mapmatch` stays light: the kernels (and numba) load when a match first needs them,
+    # also those the result and the distance check call (imported inside their functions)
+    code = (
+        "import sys, mapmatch\n"
+        "heavy = ('numba', 'networkx', 'shapely', 'osmnx', 'pyproj', 'rtree', 'pandas')\n"
+        "print([m for m in heavy if m in sys.modules])\n"
+    )
+    out = _python(code, PYTHONPATH=str(ROOT))
+    assert out.stdout.strip() == "[]", out.stderr
+
+
+def _python(code: str, **env: str) -> subprocess.CompletedProcess[str]:
+    """``code`` run by a new interpreter with ``env`` added to this process's environment."""
+    return subprocess.run(
+        [sys.executable, "-c", code],
+        env={**os.environ, **env},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
