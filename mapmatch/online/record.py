@@ -10,12 +10,12 @@ and :meth:`Record.points` give them in the shape of a :class:`~mapmatch.result.M
 from __future__ import annotations
 
 import dataclasses
-import itertools
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final
 
 import numpy as np
 
+from mapmatch.hmm.assemble import path_uturns
 from mapmatch.result import MatchedPoints, Segment
 
 if TYPE_CHECKING:
@@ -116,8 +116,8 @@ class Record:
         path = self._paths[segment]
         path.last = max(path.last, last)
         edges, lo, hi = edge.tolist(), start_m.tolist(), end_m.tolist()
-        joined = path.edge[-1:] + edges
-        self.uturns += sum(int(self._twin[a]) == b for a, b in itertools.pairwise(joined))
+        joined = np.array(path.edge[-1:] + edges, dtype=np.int64)
+        self.uturns += int(path_uturns(self._twin, joined, 0, len(joined)))
         begin = len(path.edge)
         if (
             edges
