@@ -225,6 +225,13 @@ def _put_digits(out, end, k, width):  # type: ignore[no-untyped-def]  # pragma: 
     """
     hundred = np.uint64(100)
     j = end
+    # the odd digit first, so that ``out`` is last used in the loop on every path (a last use
+    # in a branch makes numba count references on ``out`` at each inlined call: ~6 ns each)
+    if width & 1:
+        out[j - 1] = k % np.uint64(10) + np.uint64(48)
+        k //= np.uint64(10)
+        j -= 1
+        width -= 1
     while width >= 2:
         q = k // hundred
         r = (k - q * hundred) * np.uint64(2)
@@ -233,9 +240,6 @@ def _put_digits(out, end, k, width):  # type: ignore[no-untyped-def]  # pragma: 
         j -= 2
         width -= 2
         k = q
-    if width:
-        out[j - 1] = k % np.uint64(10) + np.uint64(48)
-        k //= np.uint64(10)
     return k
 
 

@@ -364,11 +364,23 @@ def _best_record(ptr, state, index_ptr, slots, copy_ptr, copy_state, rank, to_ed
 
 @njit(cache=True, nogil=True, inline="always")
 def _source_rank(sources, edge):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """Where ``edge`` sits among a table's sorted ``sources`` (-1: not a source)."""
-    rank = np.searchsorted(sources, edge)
-    if rank >= len(sources) or sources[rank] != edge:
-        return -1
-    return rank
+    """
+    Where ``edge`` sits among a table's sorted ``sources`` (-1: not a source).
+
+    A binary search written out: numba's ``np.searchsorted`` is a call that counts references
+    on ``sources`` each time (two atomic operations per distinct source of a trace's pairs).
+    """
+    lo, hi = 0, len(sources)
+    while lo < hi:  # sources are distinct: the place of the one equal to the edge
+        mid = (lo + hi) >> 1
+        source = sources[mid]
+        if source == edge:
+            return mid
+        if source < edge:
+            lo = mid + 1
+        else:
+            hi = mid
+    return -1
 
 
 @njit(cache=True, nogil=True)

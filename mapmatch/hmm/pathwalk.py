@@ -302,16 +302,25 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
                 status, n_tail = _continue_from(
                     path_e[n_path - 1], path_lo[n_path - 1], path_hi[n_path - 1],
                     move_e, move_lo, move_hi, n_move, tail_e, tail_lo, tail_hi,
-                    front_edge, front, hold_limit, edge_len, edge_u, edge_v, routing,
+                    edge_len, edge_u, edge_v,
                 )  # fmt: skip
+                # a move that ends at most the hold limit behind the front as it was before
+                # any cut has no tail: the car holds (asked here, not inside the call above,
+                # so that the routing arrays are handed over only when a move needs them)
+                if status < 0 and _behind(
+                    move_e[n_move - 1], move_hi[n_move - 1], front_edge, front, hold_limit,
+                    edge_len, routing,
+                ):  # fmt: skip
+                    status, n_tail = 0, 0
                 if status < 0:  # the move starts behind the front and turns off before it
                     n_path, done = _retract(
                         path_e, path_lo, path_hi, n_path, done, move_e[0], move_lo[0], hold_limit
                     )
+                    # (the same move is no nearer the front than before: no hold this time)
                     status, n_tail = _continue_from(
                         path_e[n_path - 1], path_lo[n_path - 1], path_hi[n_path - 1],
                         move_e, move_lo, move_hi, n_move, tail_e, tail_lo, tail_hi,
-                        front_edge, front, hold_limit, edge_len, edge_u, edge_v, routing,
+                        edge_len, edge_u, edge_v,
                     )  # fmt: skip
                 if status < 0:  # nowhere on the path: drawn as a jump
                     jumps[p] += 1
@@ -391,7 +400,7 @@ def walk_pieces(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
 @njit(cache=True, nogil=True)
 def _continue_from(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     edge, front_lo, front, move_e, move_lo, move_hi, n_move, tail_e, tail_lo, tail_hi,
-    behind_edge, behind_front, limit, edge_len, edge_u, edge_v, routing,
+    edge_len, edge_u, edge_v,
 ):  # fmt: skip
     """
     The part of a move beyond the path's front ``(edge, front_lo, front)``, into ``tail``.
@@ -400,8 +409,7 @@ def _continue_from(  # type: ignore[no-untyped-def]  # pragma: no cover - compil
     which a move may pass on other edges. Returns ``(status, n_tail)``: status 1 when the
     front's own (empty) stretch is to be dropped (the move leaves the front's node on another
     edge), 0 when not, -1 when the move never passes the front; the tail's first stretch
-    continues the front's. No tail (status 0) when the move ends at most ``limit`` behind
-    the front as it was before any cut (``behind_edge``, ``behind_front``): the car holds.
+    continues the front's.
     """
     at_start = front <= EPS_M and front_lo <= EPS_M
     at_end = front >= edge_len[edge] - EPS_M
@@ -427,9 +435,6 @@ def _continue_from(  # type: ignore[no-untyped-def]  # pragma: no cover - compil
                 tail_e[n], tail_lo[n], tail_hi[n] = move_e[j], move_lo[j], move_hi[j]
                 n += 1
             return 1, n
-    last = n_move - 1
-    if _behind(move_e[last], move_hi[last], behind_edge, behind_front, limit, edge_len, routing):
-        return 0, 0
     return -1, 0
 
 

@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import roadnets
-from roadnets.route_search import gather, table_records, table_routes
+from roadnets.route_search import _source_rank, gather, table_records, table_routes
 from roadnets.routes import DEFAULT_UTURN_COST_M, route_pairs, route_table, scratch
 from roadnets.routing import shortest_path_table
 from roadnets.turns import build_turn_graph
@@ -338,6 +338,16 @@ def test_the_staged_table_look_up_answers_as_its_steps_and_the_searches(
         assert np.array_equal(answered.uturns, uturns)
     finally:
         net.precomputed_routes = previous
+
+
+def test_a_source_is_found_at_its_place_and_any_other_edge_is_no_source() -> None:
+    rng = np.random.default_rng(5)
+    for size in (0, 1, 2, 3, 120):
+        sources = np.unique(rng.integers(0, 400, 4 * size))[:size]
+        for edge in range(-2, 405):
+            place = int(np.searchsorted(sources, edge))
+            known = place < len(sources) and sources[place] == edge
+            assert _source_rank(sources, edge) == (place if known else -1)
 
 
 def test_bad_arguments_are_named(oakland_net: roadnets.RoadNetwork) -> None:
