@@ -258,11 +258,13 @@ def _put_int(out, at, k):  # type: ignore[no-untyped-def]  # pragma: no cover
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _put_float(out, at, v, digits, rounding, pow10):  # type: ignore[no-untyped-def]  # pragma: no cover
+def _float_decimal(v, digits, rounding, pow10):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
-    Write ``repr`` of the finite ``v`` (rounded first) at ``out[at:]``; return the end.
+    The decimal ``repr`` writes for the finite ``v`` (rounded first): ``(n, decimals, minus)``.
 
-    -1 if ``repr`` itself must write it.
+    The text is ``n`` with a point before its last ``decimals`` digits (trailing zeros
+    dropped, at least one decimal: a whole number is ``10 n`` with one), ``-`` first when
+    ``minus``; ``decimals`` is -1 where ``repr`` itself must write it.
     ``rounding`` 1 is numpy's (``rint(v * 10**digits) / 10**digits``), 2 Python's
     ``round`` (:func:`py_round`: numpy's unless the product is within rounding error of a
     half, then -1). Then ``n = |v| * 10**digits`` rounded must give ``v`` back (then the
@@ -270,15 +272,16 @@ def _put_float(out, at, v, digits, rounding, pow10):  # type: ignore[no-untyped-
     back as ``v``, which is what ``repr`` writes) and have at most 15 digits; ``repr`` also
     writes ``1e-05`` below 1e-4.
     """
+    none = (np.uint64(0), -1, False)
     scale = pow10[digits]
     if rounding:
         y = v * scale
         if not np.isfinite(y):
-            return -1
+            return none
         if rounding == 2:
             ay = abs(y)
             if ay >= 2.0**52 or abs(abs(y - np.trunc(y)) - 0.5) <= 1e-9 + 8.0 * _EPS * ay:
-                return -1
+                return none
         whole = np.rint(y)
         v = whole / scale
         a = abs(v)
@@ -289,22 +292,31 @@ def _put_float(out, at, v, digits, rounding, pow10):  # type: ignore[no-untyped-
         n = np.rint(a * scale)
         back = n / scale == a
     if n >= _MAX_EXACT or not back or (a != 0.0 and a < 1e-4):
-        return -1
-    if math.copysign(1.0, v) < 0:
-        out[at] = 45  # -
-        at += 1
+        return none
+    minus = math.copysign(1.0, v) < 0
     ten = np.uint64(10)
     k = np.uint64(n)
-    if digits == 0:
-        end = at + _width(k)
-        _put_digits(out, end, k, end - at)
-        out[end] = 46  # .
-        out[end + 1] = 48  # 0
-        return end + 2
+    if digits == 0:  # "n.0" (below 10**15: ten times it fits)
+        return k * ten, 1, minus
     kept = digits  # decimals written: trailing zeros dropped, at least one
     while kept > 1 and k % ten == 0:
         k //= ten
         kept -= 1
+    return k, kept, minus
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _put_decimal(out, at, k, kept, minus):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    Write :func:`_float_decimal`'s decimal at ``out[at:]``; return the end.
+
+    Apart from :func:`_float_decimal`, which may leave the number to ``repr`` before writing
+    anything, so that ``out`` is last used on every path at the same place (see
+    :func:`_put_digits`).
+    """
+    if minus:
+        out[at] = 45  # -
+        at += 1
     end = at + max(_width(k) - kept, 1) + 1 + kept  # the whole part, the point, the decimals
     whole = _put_digits(out, end, k, kept)
     out[end - kept - 1] = 46  # .
@@ -509,15 +521,15 @@ def _write_rows(  # type: ignore[no-untyped-def]  # pragma: no cover
                 if (b >= 0 and not ints[ints_at[b] + row]) or not np.isfinite(v):
                     at = _put_null(out, at)
                 else:
-                    end = _put_float(out, at, v, ops[k, 3] >> 2, ops[k, 3] & 3, pow10)
-                    if end < 0:
+                    n, kept, minus = _float_decimal(v, ops[k, 3] >> 2, ops[k, 3] & 3, pow10)
+                    if kept < 0:
                         slow[n_slow, 0] = at
                         slow[n_slow, 1] = k
                         slow[n_slow, 2] = row
                         slow[n_slow, 3] = r
                         n_slow += 1
                     else:
-                        at = end
+                        at = _put_decimal(out, at, n, kept, minus)
             elif code == 2:
                 if b >= 0 and not ints[ints_at[b] + row]:
                     at = _put_null(out, at)
