@@ -226,7 +226,7 @@ def _put_digits(out, end, k, width):  # type: ignore[no-untyped-def]  # pragma: 
     hundred = np.uint64(100)
     j = end
     # the odd digit first, so that ``out`` is last used in the loop on every path (a last use
-    # in a branch makes numba count references on ``out`` at each inlined call: ~6 ns each)
+    # in a branch makes numba count references on ``out`` at each inlined call, a few ns each)
     if width & 1:
         out[j - 1] = k % np.uint64(10) + np.uint64(48)
         k //= np.uint64(10)
@@ -310,9 +310,8 @@ def _put_decimal(out, at, k, kept, minus):  # type: ignore[no-untyped-def]  # pr
     """
     Write :func:`_float_decimal`'s decimal at ``out[at:]``; return the end.
 
-    Apart from :func:`_float_decimal`, which may leave the number to ``repr`` before writing
-    anything, so that ``out`` is last used on every path at the same place (see
-    :func:`_put_digits`).
+    Kept apart from :func:`_float_decimal` (which may leave the number to ``repr``) so that
+    ``out`` is last used at one place on every path (see :func:`_put_digits`).
     """
     if minus:
         out[at] = 45  # -
