@@ -27,6 +27,7 @@ import bisect
 import collections
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -158,6 +159,9 @@ def main(argv: list[str] | None = None) -> int:
     if role == "child":
         _child(args, Path(os.environ[_DIR]))
         return 0
+    if shutil.which("gdb") is None:
+        print("count_refcounts needs gdb (Debian: apt-get install gdb)", file=sys.stderr)
+        return 1
     with tempfile.TemporaryDirectory() as tmp:
         workdir = Path(tmp)
         env = dict(
@@ -176,12 +180,18 @@ def main(argv: list[str] | None = None) -> int:
             print("the child process did not get ready", file=sys.stderr)
             return 1
         gdb_env = dict(os.environ, **{_ROLE: "gdb", _DIR: tmp})
-        subprocess.run(
+        debugger = subprocess.run(
             ["gdb", "-p", ready[1], "-batch", "-x", __file__],
             env=gdb_env,
-            check=True,
+            check=False,
             capture_output=True,
+            text=True,
         )
+        if not (workdir / "counts.txt").exists():  # gdb could not attach or count: say why
+            child.kill()
+            child.wait()
+            print("gdb counted nothing:", debugger.stderr.strip()[-2000:], file=sys.stderr)
+            return 1
         child.wait()
         _report(workdir, int(ready[2]), args.top)
     return 0
