@@ -35,8 +35,9 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-SHARED = ROOT.parent / "shared" / "data" / "osm"
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from kernel_time import add_trace_arguments
+
 #: The environment variable that tells the process its part (the child or gdb's side).
 _ROLE = "COUNT_REFCOUNTS_ROLE"
 _DIR = "COUNT_REFCOUNTS_DIR"
@@ -60,37 +61,21 @@ def _name(symbol: str) -> str:
 
 def _child(args: argparse.Namespace, workdir: Path) -> None:
     """Load, compile, list the compiled functions, then match again once gdb is attached."""
-    sys.path[:0] = [str(ROOT), str(ROOT / "benchmarks")]
-    from bench_fixed_cost import traces_of
-    from numba.core.registry import CPUDispatcher
+    from kernel_time import network_and_traces, our_kernels
 
     import mapmatch
-    import roadnets
     from mapmatch.export import geojson_bytes
 
-    net = roadnets.load(args.extract)
-    net.sparse_route_table()
-    if args.csv:
-        traces = list(mapmatch.read_traces(args.csv))
-        config = mapmatch.MatchConfig(sigma_m=args.sigma)
-    else:
-        traces = traces_of(net, args.interval, args.fixes, args.traces)
-        config = mapmatch.MatchConfig()
+    net, traces, config = network_and_traces(args)
     for trace in traces:
         geojson_bytes(mapmatch.match(trace, net, config))
     functions: set[tuple[int, str]] = set()
-    ours = [m for name, m in sys.modules.items() if name.startswith(("mapmatch", "roadnets"))]
-    for module in ours:
-        for value in list(vars(module).values()):
-            if not isinstance(value, CPUDispatcher):
-                continue
-            for compiled in value.overloads.values():
-                library = compiled.library  # type: ignore[attr-defined]
-                for function in library._final_module.functions:
-                    if not function.is_declaration:
-                        functions.add(
-                            (library.get_pointer_to_function(function.name), function.name)
-                        )
+    for _, _, kernel in our_kernels():
+        for compiled in kernel.overloads.values():
+            library = compiled.library
+            for function in library._final_module.functions:
+                if not function.is_declaration:
+                    functions.add((library.get_pointer_to_function(function.name), function.name))
     lines = [f"{address:x} {name}" for address, name in sorted(functions) if address]
     (workdir / "functions.txt").write_text("\n".join(lines) + "\n")
     print("READY", os.getpid(), len(traces), flush=True)
@@ -147,12 +132,7 @@ def _report(workdir: Path, traces: int, top: int) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--extract", default=str(SHARED / "krems_at_2013.osm.gz"))
-    parser.add_argument("--interval", type=float, default=15.0, help="seconds between fixes")
-    parser.add_argument("--fixes", type=int, default=25, help="fixes a simulated trace")
-    parser.add_argument("--traces", type=int, default=20, help="simulated traces")
-    parser.add_argument("--csv", help="a trace file to match instead of simulated traces")
-    parser.add_argument("--sigma", type=float, default=10.0, help="sigma_m with --csv")
+    add_trace_arguments(parser)
     parser.add_argument("--top", type=int, default=25, help="functions listed")
     args = parser.parse_args(argv)
     role = os.environ.get(_ROLE)

@@ -1,0 +1,168 @@
+"""Where a trace's time goes: each compiled kernel in the flow of matches, against warm.
+
+    .venv/bin/python benchmarks/kernel_time.py [--extract PATH] [--interval 15]
+        [--fixes 25] [--traces 20] [--csv TRACES.csv --sigma 10] [--passes 15] [--warm 5]
+
+The traces are matched one after the other (match + GeoJSON text, as a user of the library
+gets them), ``--passes`` times; every kernel the Python code calls is timed where it is
+called, and the rest of the pass is the Python between them. The pass with the least time
+counts. Each call of that pass is then made again on its own, ``--warm`` times in a row
+with the same arguments, and the fastest counts: the kernel with its code and data in the
+caches. In the flow a kernel starts cold (the match's other kernels, the interpreter and the
+trace's data have run since its last call); the last column says by how much. Times are
+wall-clock microseconds a trace on one thread (the machine may be shared: run it twice).
+
+The traces: ``--traces`` simulated trips on the extract, ``--fixes`` fixes each at
+``--interval`` (heading and speed given, 2 % outliers of 40 m), or every trace of ``--csv``
+matched with ``--sigma`` (the peer sets: ``.bench/peers/sets/krems_at_2013/15s_10m/
+positions.csv --sigma 10``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import sys
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Iterator
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED = ROOT.parent / "shared" / "data" / "osm"
+
+
+def add_trace_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options that choose the network and the traces (see :func:`network_and_traces`)."""
+    parser.add_argument("--extract", default=str(SHARED / "krems_at_2013.osm.gz"))
+    parser.add_argument("--interval", type=float, default=15.0, help="seconds between fixes")
+    parser.add_argument("--fixes", type=int, default=25, help="fixes a simulated trace")
+    parser.add_argument("--traces", type=int, default=20, help="simulated traces")
+    parser.add_argument("--csv", help="a trace file to match instead of simulated traces")
+    parser.add_argument("--sigma", type=float, default=10.0, help="sigma_m with --csv")
+
+
+def network_and_traces(args: argparse.Namespace) -> tuple[Any, list[Any], Any]:
+    """The network (its route table read), the traces and the configuration to match them with."""
+    sys.path[:0] = [str(ROOT), str(ROOT / "benchmarks")]
+    from bench_fixed_cost import traces_of
+
+    import mapmatch
+    import roadnets
+
+    net = roadnets.load(args.extract)
+    net.sparse_route_table()
+    if args.csv:
+        return net, list(mapmatch.read_traces(args.csv)), mapmatch.MatchConfig(sigma_m=args.sigma)
+    return net, traces_of(net, args.interval, args.fixes, args.traces), mapmatch.MatchConfig()
+
+
+def our_kernels() -> Iterator[tuple[Any, str, Any]]:
+    """``(module, name, dispatcher)`` of every numba kernel a loaded module of ours binds."""
+    from numba.core.registry import CPUDispatcher
+
+    ours = [m for name, m in list(sys.modules.items()) if name.startswith(("mapmatch", "roadnets"))]
+    for module in ours:
+        for name, value in list(vars(module).items()):
+            if isinstance(value, CPUDispatcher):
+                yield module, name, value
+
+
+class _Timed:
+    """A kernel's stand-in: times each call, and keeps the calls' arguments when asked."""
+
+    def __init__(self, kernel: Any, label: str, spent: collections.Counter[str]) -> None:
+        self.kernel, self.label, self.spent = kernel, label, spent
+        self.calls: collections.Counter[str] = collections.Counter()
+        self.kept: list[tuple[str, tuple[Any, ...]]] | None = None
+
+    def __call__(self, *args: Any) -> Any:
+        start = time.perf_counter()
+        try:
+            return self.kernel(*args)
+        finally:
+            self.spent[self.label] += time.perf_counter() - start
+            self.calls[self.label] += 1
+            if self.kept is not None:
+                self.kept.append((self.label, args))
+
+
+def _warm(kernel: Callable[..., Any], args: tuple[Any, ...], times: int) -> float:
+    """The fastest of ``times`` calls in a row with the same arguments, seconds."""
+    best = float("inf")
+    for _ in range(times):
+        start = time.perf_counter()
+        kernel(*args)
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_trace_arguments(parser)
+    parser.add_argument("--passes", type=int, default=15, help="passes over the traces")
+    parser.add_argument("--warm", type=int, default=5, help="calls in a row for the warm time")
+    args = parser.parse_args(argv)
+    net, traces, config = network_and_traces(args)
+
+    import mapmatch
+    from mapmatch.export import geojson_bytes
+
+    def one_pass() -> float:
+        start = time.perf_counter()
+        for trace in traces:
+            geojson_bytes(mapmatch.match(trace, net, config))
+        return time.perf_counter() - start
+
+    one_pass()  # compiles or loads every kernel the traces need
+    spent: collections.Counter[str] = collections.Counter()
+    stand_ins: dict[int, _Timed] = {}
+    for module, name, kernel in our_kernels():
+        label = f"{kernel.py_func.__module__}.{kernel.py_func.__name__}"
+        stand_in = stand_ins.setdefault(id(kernel), _Timed(kernel, label, spent))
+        setattr(module, name, stand_in)
+    best: tuple[float, collections.Counter[str], collections.Counter[str]] | None = None
+    kept: list[tuple[str, tuple[Any, ...]]] = []
+    for _ in range(max(1, args.passes)):
+        spent.clear()
+        calls: collections.Counter[str] = collections.Counter()
+        for stand_in in stand_ins.values():
+            stand_in.calls = calls
+            stand_in.kept = []
+        total = one_pass()
+        if best is None or total < best[0]:
+            best = (total, collections.Counter(spent), calls)
+            kept = [call for s in stand_ins.values() for call in s.kept or []]
+    assert best is not None
+    total, in_flow, calls = best
+    kernels = {s.label: s.kernel for s in stand_ins.values()}
+    warm: collections.Counter[str] = collections.Counter()
+    for label, kernel_args in kept:
+        warm[label] += _warm(kernels[label], kernel_args, max(1, args.warm))
+
+    n = len(traces)
+    points = sum(len(t.lon) for t in traces)
+    us = 1e6 / n
+    in_kernels = sum(in_flow.values())
+    print(
+        f"{n} traces, {points / n:.1f} fixes a trace: {total * us:.0f} us a trace "
+        f"(match + GeoJSON), {in_kernels * us:.0f} in kernels called from Python, "
+        f"{(total - in_kernels) * us:.0f} in the Python between them; kernels warm "
+        f"{sum(warm.values()) * us:.0f}"
+    )
+    print()
+    print("| kernel | calls a trace | in the flow us | warm us | flow / warm |")
+    print("|---|--:|--:|--:|--:|")
+    for label, seconds in in_flow.most_common():
+        ratio = seconds / warm[label] if warm[label] > 0 else float("nan")
+        print(
+            f"| {label} | {calls[label] / n:.1f} | {seconds * us:.1f} | "
+            f"{warm[label] * us:.1f} | {ratio:.2f} |"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
