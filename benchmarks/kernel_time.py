@@ -6,10 +6,12 @@
 The traces are matched one after the other (match + GeoJSON text, as a user of the library
 gets them), ``--passes`` times; every kernel the Python code calls is timed where it is
 called, and the rest of the pass is the Python between them. The pass with the least time
-counts. Each call of that pass is then made again on its own, ``--warm`` times in a row
-with the same arguments, and the fastest counts: the kernel with its code and data in the
-caches. In the flow a kernel starts cold (the match's other kernels, the interpreter and the
-trace's data have run since its last call); the last column says by how much. Times are
+counts. Each call of that pass is then made twice more on its own: right after the same
+kernel ran on another trace's arguments (its code warm, this trace's data not), and again
+with the same arguments, the fastest of ``--warm`` calls in a row (code, data and the branch
+history all warm: a floor no real trace sees). In the flow a kernel starts cold (the match's
+other kernels, the interpreter and the trace's data have run since its last call); the
+columns say by how much, and whether its code or what it reads is the cost. Times are
 wall-clock microseconds a trace on one thread (the machine may be shared: run it twice).
 
 The traces: ``--traces`` simulated trips on the extract, ``--fixes`` fixes each at
@@ -89,7 +91,7 @@ class _Timed:
                 self.kept.append((self.label, args))
 
 
-def _warm(kernel: Callable[..., Any], args: tuple[Any, ...], times: int) -> float:
+def _again(kernel: Callable[..., Any], args: tuple[Any, ...], times: int) -> float:
     """The fastest of ``times`` calls in a row with the same arguments, seconds."""
     best = float("inf")
     for _ in range(times):
@@ -97,6 +99,16 @@ def _warm(kernel: Callable[..., Any], args: tuple[Any, ...], times: int) -> floa
         kernel(*args)
         best = min(best, time.perf_counter() - start)
     return best
+
+
+def _after_another(
+    kernel: Callable[..., Any], args: tuple[Any, ...], other: tuple[Any, ...]
+) -> float:
+    """Seconds of one call right after the kernel ran on ``other`` (its code warm)."""
+    kernel(*other)
+    start = time.perf_counter()
+    kernel(*args)
+    return time.perf_counter() - start
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -138,9 +150,17 @@ def main(argv: list[str] | None = None) -> int:
     assert best is not None
     total, in_flow, calls = best
     kernels = {s.label: s.kernel for s in stand_ins.values()}
-    warm: collections.Counter[str] = collections.Counter()
+    by_kernel: dict[str, list[tuple[Any, ...]]] = collections.defaultdict(list)
     for label, kernel_args in kept:
-        warm[label] += _warm(kernels[label], kernel_args, max(1, args.warm))
+        by_kernel[label].append(kernel_args)
+    code_warm: collections.Counter[str] = collections.Counter()
+    warm: collections.Counter[str] = collections.Counter()
+    for label, calls_args in by_kernel.items():
+        kernel = kernels[label]
+        for i, kernel_args in enumerate(calls_args):
+            other = calls_args[(i + len(calls_args) // 2) % len(calls_args)]
+            code_warm[label] += _after_another(kernel, kernel_args, other)
+            warm[label] += _again(kernel, kernel_args, max(1, args.warm))
 
     n = len(traces)
     points = sum(len(t.lon) for t in traces)
@@ -149,17 +169,17 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"{n} traces, {points / n:.1f} fixes a trace: {total * us:.0f} us a trace "
         f"(match + GeoJSON), {in_kernels * us:.0f} in kernels called from Python, "
-        f"{(total - in_kernels) * us:.0f} in the Python between them; kernels warm "
-        f"{sum(warm.values()) * us:.0f}"
+        f"{(total - in_kernels) * us:.0f} in the Python between them; the kernels "
+        f"{sum(code_warm.values()) * us:.0f} with their code warm, "
+        f"{sum(warm.values()) * us:.0f} all warm"
     )
     print()
-    print("| kernel | calls a trace | in the flow us | warm us | flow / warm |")
+    print("| kernel | calls a trace | in the flow us | code warm us | all warm us |")
     print("|---|--:|--:|--:|--:|")
     for label, seconds in in_flow.most_common():
-        ratio = seconds / warm[label] if warm[label] > 0 else float("nan")
         print(
             f"| {label} | {calls[label] / n:.1f} | {seconds * us:.1f} | "
-            f"{warm[label] * us:.1f} | {ratio:.2f} |"
+            f"{code_warm[label] * us:.1f} | {warm[label] * us:.1f} |"
         )
     return 0
 
