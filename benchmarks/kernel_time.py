@@ -73,22 +73,28 @@ def our_kernels() -> Iterator[tuple[Any, str, Any]]:
 
 
 class _Timed:
-    """A kernel's stand-in: times each call, and keeps the calls' arguments when asked."""
+    """A kernel's stand-in: adds each call's time, count and arguments to the pass's records."""
 
-    def __init__(self, kernel: Any, label: str, spent: collections.Counter[str]) -> None:
-        self.kernel, self.label, self.spent = kernel, label, spent
-        self.calls: collections.Counter[str] = collections.Counter()
-        self.kept: list[tuple[str, tuple[Any, ...]]] | None = None
+    def __init__(self, kernel: Any, label: str, records: _PassRecords) -> None:
+        self.kernel, self.label, self.records = kernel, label, records
 
     def __call__(self, *args: Any) -> Any:
         start = time.perf_counter()
         try:
             return self.kernel(*args)
         finally:
-            self.spent[self.label] += time.perf_counter() - start
-            self.calls[self.label] += 1
-            if self.kept is not None:
-                self.kept.append((self.label, args))
+            self.records.spent[self.label] += time.perf_counter() - start
+            self.records.calls[self.label] += 1
+            self.records.kept.append((self.label, args))
+
+
+class _PassRecords:
+    """What one pass's kernel calls took: seconds and calls by kernel, and each call's arguments."""
+
+    def __init__(self) -> None:
+        self.spent: collections.defaultdict[str, float] = collections.defaultdict(float)
+        self.calls: collections.Counter[str] = collections.Counter()
+        self.kept: list[tuple[str, tuple[Any, ...]]] = []
 
 
 def _again(kernel: Callable[..., Any], args: tuple[Any, ...], times: int) -> float:
@@ -129,32 +135,29 @@ def main(argv: list[str] | None = None) -> int:
         return time.perf_counter() - start
 
     one_pass()  # compiles or loads every kernel the traces need
-    spent: collections.Counter[str] = collections.Counter()
+    records = _PassRecords()
     stand_ins: dict[int, _Timed] = {}
     for module, name, kernel in our_kernels():
         label = f"{kernel.py_func.__module__}.{kernel.py_func.__name__}"
-        stand_in = stand_ins.setdefault(id(kernel), _Timed(kernel, label, spent))
+        stand_in = stand_ins.setdefault(id(kernel), _Timed(kernel, label, records))
         setattr(module, name, stand_in)
-    best: tuple[float, collections.Counter[str], collections.Counter[str]] | None = None
-    kept: list[tuple[str, tuple[Any, ...]]] = []
+    best: tuple[float, _PassRecords] | None = None
     for _ in range(max(1, args.passes)):
-        spent.clear()
-        calls: collections.Counter[str] = collections.Counter()
+        records = _PassRecords()
         for stand_in in stand_ins.values():
-            stand_in.calls = calls
-            stand_in.kept = []
+            stand_in.records = records
         total = one_pass()
         if best is None or total < best[0]:
-            best = (total, collections.Counter(spent), calls)
-            kept = [call for s in stand_ins.values() for call in s.kept or []]
+            best = (total, records)
     assert best is not None
-    total, in_flow, calls = best
+    total, fastest = best
+    in_flow, calls, kept = fastest.spent, fastest.calls, fastest.kept
     kernels = {s.label: s.kernel for s in stand_ins.values()}
     by_kernel: dict[str, list[tuple[Any, ...]]] = collections.defaultdict(list)
     for label, kernel_args in kept:
         by_kernel[label].append(kernel_args)
-    code_warm: collections.Counter[str] = collections.Counter()
-    warm: collections.Counter[str] = collections.Counter()
+    code_warm: collections.defaultdict[str, float] = collections.defaultdict(float)
+    warm: collections.defaultdict[str, float] = collections.defaultdict(float)
     for label, calls_args in by_kernel.items():
         kernel = kernels[label]
         for i, kernel_args in enumerate(calls_args):
@@ -176,7 +179,7 @@ def main(argv: list[str] | None = None) -> int:
     print()
     print("| kernel | calls a trace | in the flow us | code warm us | all warm us |")
     print("|---|--:|--:|--:|--:|")
-    for label, seconds in in_flow.most_common():
+    for label, seconds in sorted(in_flow.items(), key=lambda item: -item[1]):
         print(
             f"| {label} | {calls[label] / n:.1f} | {seconds * us:.1f} | "
             f"{code_warm[label] * us:.1f} | {warm[label] * us:.1f} |"
