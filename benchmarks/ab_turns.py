@@ -1,0 +1,338 @@
+"""Versions of the matcher timed in turns: source trees, or settings of one tree.
+
+    .venv/bin/python benchmarks/ab_turns.py --variant base=/tmp/old-tree --variant new=. \
+        [--variant novec=.:NUMBA_LOOP_VECTORIZE=0,NUMBA_CACHE_DIR=/tmp/nc-novec] \
+        [--set krems_at_2013:15s_10m:positions ...] [--set sim:15:25:20] \
+        [--rounds 100] [--passes 3] [--sets-dir .bench/peers/sets]
+
+A change that saves a few per cent of a trace is smaller than the shared machine's swings
+between minutes (a sixth, more in a slow spell), so it is measured in turns: one process per
+variant (``NAME=TREE``, the tree's ``mapmatch`` and ``roadnets`` first on the path, and
+``:KEY=VALUE,...`` added to its environment), every process loaded and warm, then round after
+round each process in turn runs ``--passes`` passes over every set (match + GeoJSON text, as a
+user of the library gets them; the fastest pass counts, CPU time a trace), the order reversed
+every other round, so that every variant meets the same spells. Reported per set: each
+variant's median over the rounds, and against the first variant the median of the rounds'
+paired ratios with their quartiles (below 1: faster), and whether its documents are the
+first variant's (their stats' timings left out: a change meant to be faster only should
+print ``equal``). The baseline's tree once more under another name shows the sitting's noise
+(its ratio should come out within a per cent of 1).
+
+A set is a trace file of the peer comparison, ``EXTRACT:SET:INPUT``: ``krems_at_2013:15s_10m:
+positions`` is ``krems_at_2013/15s_10m/positions.csv`` in ``--sets-dir`` (a folder a
+``compare_peers.py`` run wrote, ``.bench/peers/sets`` unless said: every run simulates the
+same traces), matched on ``krems_at_2013.osm.gz`` from ``../shared/data/osm`` with ``sigma_m``
+the set's noise; or
+``sim:INTERVAL:FIXES:TRACES[:EXTRACT]``: simulated trips (heading and speed given, 2 %
+outliers of 40 m) on the extract (the embedded network without one), simulated once here and
+written to a file every variant reads. A tree needs its kernels compiled (its first start
+takes about a minute, once); a variant with settings that change the compiled code wants a
+``NUMBA_CACHE_DIR`` of its own.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import hashlib
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+SETS = ROOT / ".bench" / "peers" / "sets"
+SHARED = ROOT.parent / "shared" / "data" / "osm"
+#: What a worker prints when its sets are loaded and matched once.
+READY = "ready"
+
+
+@dataclass(frozen=True, slots=True)
+class TraceSet:
+    """A trace file, the extract it is matched on (``None``: the embedded network), its sigma."""
+
+    label: str
+    csv: str
+    extract: str | None
+    sigma_m: float | None
+
+
+@dataclass(frozen=True, slots=True)
+class Variant:
+    """A version of the matcher: a source tree and what its process's environment adds."""
+
+    name: str
+    tree: Path
+    env: dict[str, str]
+
+
+def parse_variant(text: str) -> Variant:
+    """``NAME=TREE[:KEY=VALUE,...]``."""
+    name, sep, rest = text.partition("=")
+    tree, _, settings = rest.partition(":")
+    if not sep or not name or not tree:
+        msg = f"bad --variant {text!r}; write NAME=TREE or NAME=TREE:KEY=VALUE,..."
+        raise SystemExit(msg)
+    env = {}
+    for item in filter(None, settings.split(",")):
+        key, eq, value = item.partition("=")
+        if not eq or not key:
+            msg = f"bad setting {item!r} in --variant {text!r}; write KEY=VALUE"
+            raise SystemExit(msg)
+        env[key] = value
+    path = Path(tree).resolve()
+    if not (path / "mapmatch" / "__init__.py").is_file():
+        msg = f"--variant {name}: {path} holds no mapmatch package"
+        raise SystemExit(msg)
+    return Variant(name, path, env)
+
+
+def _extract_file(stem: str) -> str:
+    found = sorted(SHARED.glob(stem + ".osm*"))
+    if not found:
+        msg = f"no extract {stem}.osm* in {SHARED}"
+        raise SystemExit(msg)
+    return str(found[0])
+
+
+def parse_set(text: str, scratch: Path, sets_dir: Path = SETS) -> TraceSet:
+    """A peer set (``EXTRACT:SET:INPUT``) or simulated traces (``sim:INTERVAL:FIXES:TRACES``)."""
+    parts = text.split(":")
+    if parts[0] == "sim" and len(parts) in (4, 5):
+        interval, fixes, count = float(parts[1]), int(parts[2]), int(parts[3])
+        extract = _extract_file(parts[4]) if len(parts) == 5 else None
+        path = scratch / f"sim-{len(list(scratch.iterdir()))}.csv"
+        _write_simulated(path, extract, interval, fixes, count)
+        return TraceSet(text, str(path), extract, None)
+    if len(parts) == 3:
+        stem, label, kind = parts
+        path = sets_dir / stem / label / f"{kind}.csv"
+        if not path.is_file():
+            msg = f"no trace file {path} (benchmarks/compare_peers.py writes the peer sets)"
+            raise SystemExit(msg)
+        noise = float(label.split("_")[1].rstrip("m"))
+        return TraceSet(text, str(path), _extract_file(stem), noise)
+    msg = f"bad --set {text!r}; write EXTRACT:SET:INPUT or sim:INTERVAL:FIXES:TRACES[:EXTRACT]"
+    raise SystemExit(msg)
+
+
+def _write_simulated(
+    path: Path, extract: str | None, interval_s: float, fixes: int, count: int
+) -> None:
+    """Simulated traces (``bench_fixed_cost.traces_of``) as a trace file."""
+    sys.path[:0] = [p for p in (str(ROOT), str(ROOT / "benchmarks")) if p not in sys.path]
+    from bench_fixed_cost import traces_of
+
+    import roadnets
+
+    net = roadnets.load(extract) if extract else roadnets.load()
+    rows = []
+    for trace in traces_of(net, interval_s, fixes, count):
+        named = {
+            "time": trace.time_s,
+            "lon": trace.lon,
+            "lat": trace.lat,
+            "heading": trace.heading_deg,
+            "speed": trace.speed_mps,
+        }
+        columns = {name: values for name, values in named.items() if values is not None}
+        rows += [
+            {"trace_id": trace.trace_id} | {k: repr(float(v[i])) for k, v in columns.items()}
+            for i in range(len(trace.lon))
+        ]
+    with path.open("w", newline="") as f:
+        out = csv.DictWriter(f, fieldnames=list(rows[0]))
+        out.writeheader()
+        out.writerows(rows)
+
+
+# --------------------------------------------------------------------------- the worker
+
+
+def worker(sets: list[dict[str, Any]], passes: int) -> None:
+    """Load the sets, say where ``mapmatch`` came from, then time a round on each ``go``."""
+    import mapmatch
+    import roadnets
+    from mapmatch.export import geojson_bytes
+
+    jobs = []
+    digests = []
+    for s in sets:
+        net = roadnets.load(s["extract"]) if s["extract"] else roadnets.load()
+        net.sparse_route_table()
+        traces = list(mapmatch.read_traces(s["csv"]))
+        config = mapmatch.MatchConfig(sigma_m=s["sigma_m"]) if s["sigma_m"] else None
+        digest = hashlib.sha256()
+        for trace in traces:  # warm, and the documents' digest
+            digest.update(_without_timings(geojson_bytes(mapmatch.match(trace, net, config))))
+        digests.append(digest.hexdigest()[:16])
+        jobs.append((net, traces, config))
+    print(json.dumps({READY: str(Path(mapmatch.__file__).parent), "digests": digests}), flush=True)
+    for _ in sys.stdin:
+        times = []
+        for net, traces, config in jobs:
+            best = float("inf")
+            for _ in range(passes):
+                start = time.process_time()
+                for trace in traces:
+                    geojson_bytes(mapmatch.match(trace, net, config))
+                best = min(best, time.process_time() - start)
+            times.append(best / len(traces) * 1e6)
+        print(json.dumps(times), flush=True)
+
+
+def _without_timings(document: bytes) -> bytes:
+    """A GeoJSON document without its stats' timings (which differ every run), re-written."""
+    doc = json.loads(document)
+    if isinstance(doc.get("stats"), dict):
+        doc["stats"].pop("timings_s", None)
+    return json.dumps(doc, separators=(",", ":")).encode()
+
+
+# --------------------------------------------------------------------------- the turns
+
+
+class Worker:
+    """A variant's process, loaded and warm: asked for a round, it answers its times."""
+
+    def __init__(self, variant: Variant, sets: list[TraceSet], passes: int) -> None:
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join(
+            [str(variant.tree), *filter(None, [env.get("PYTHONPATH")])]
+        )
+        env.update(variant.env)
+        spec = json.dumps(
+            [{"csv": s.csv, "extract": s.extract, "sigma_m": s.sigma_m} for s in sets]
+        )
+        self.process = subprocess.Popen(
+            [sys.executable, __file__, "--worker", spec, "--passes", str(passes)],
+            cwd=tempfile.gettempdir(),  # not a tree: only PYTHONPATH says which mapmatch
+            env=env,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        self.name = variant.name
+        line = self._line()
+        if not line:
+            self.close()
+            msg = f"variant {variant.name}: its worker stopped before it was ready"
+            raise SystemExit(msg)
+        said = json.loads(line)
+        if Path(said[READY]) != variant.tree / "mapmatch":
+            self.close()
+            msg = f"variant {variant.name} imported mapmatch from {said[READY]}, not its tree"
+            raise SystemExit(msg)
+        #: Per set, 16 hex digits of the SHA-256 of its documents, their timings left out.
+        self.digests: list[str] = said["digests"]
+
+    def _line(self) -> str:
+        assert self.process.stdout is not None
+        return self.process.stdout.readline()
+
+    def round(self) -> list[float]:
+        """One round: us a trace per set."""
+        assert self.process.stdin is not None
+        self.process.stdin.write("go\n")
+        self.process.stdin.flush()
+        line = self._line()
+        if not line:
+            msg = f"variant {self.name}: its worker stopped in the middle of the turns"
+            raise SystemExit(msg)
+        times: list[float] = json.loads(line)
+        return times
+
+    def close(self) -> None:
+        assert self.process.stdin is not None
+        assert self.process.stdout is not None
+        self.process.stdin.close()  # the worker's loop ends
+        self.process.wait()
+        self.process.stdout.close()
+
+
+def run_turns(
+    variants: list[Variant], sets: list[TraceSet], rounds: int, passes: int
+) -> tuple[dict[str, list[list[float]]], dict[str, list[str]]]:
+    """Each variant's us a trace per round and set, and its documents' digests per set."""
+    workers: dict[str, Worker] = {}
+    try:
+        for v in variants:
+            workers[v.name] = Worker(v, sets, passes)
+        times: dict[str, list[list[float]]] = {v.name: [] for v in variants}
+        for r in range(rounds):
+            for v in variants if r % 2 == 0 else variants[::-1]:
+                times[v.name].append(workers[v.name].round())
+    finally:
+        for w in workers.values():
+            w.close()
+    return times, {name: w.digests for name, w in workers.items()}
+
+
+def report(
+    variants: list[Variant],
+    sets: list[TraceSet],
+    times: dict[str, list[list[float]]],
+    digests: dict[str, list[str]],
+) -> str:
+    """The table: per set and variant, the median us a trace, the paired ratio, the output."""
+    base = variants[0].name
+    lines = [
+        "| set | variant | us a trace (median) | / " + base + " (paired, quartiles) | documents |",
+        "|---|---|--:|---|---|",
+    ]
+    for i, s in enumerate(sets):
+        ours = [round_[i] for round_ in times[base]]
+        for v in variants:
+            mine = [round_[i] for round_ in times[v.name]]
+            if v.name == base:
+                ratio, same = "", f"`{digests[base][i]}`"
+            else:
+                paired = sorted(b / a for a, b in zip(ours, mine, strict=True))
+                q1, q3 = paired[len(paired) // 4], paired[(3 * len(paired)) // 4]
+                ratio = f"{statistics.median(paired):.3f} ({q1:.3f}-{q3:.3f})"
+                same = "equal" if digests[v.name][i] == digests[base][i] else "differ"
+            median = statistics.median(mine)
+            lines.append(f"| {s.label} | {v.name} | {median:.1f} | {ratio} | {same} |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--variant", action="append", default=[], help="NAME=TREE[:KEY=VALUE,...]")
+    p.add_argument("--set", action="append", default=[], help="EXTRACT:SET:INPUT or sim:...")
+    p.add_argument("--rounds", type=int, default=100, help="rounds of turns (default 100)")
+    p.add_argument("--passes", type=int, default=3, help="passes a round, the fastest kept")
+    p.add_argument("--sets-dir", type=Path, default=SETS, help="where the peer sets are")
+    p.add_argument("--worker", help=argparse.SUPPRESS)
+    a = p.parse_args(argv)
+    if a.worker is not None:
+        worker(json.loads(a.worker), a.passes)
+        return 0
+    if len(a.variant) < 2:
+        p.error("give at least two --variant")
+    if a.rounds < 1 or a.passes < 1:
+        p.error("--rounds and --passes must be at least 1")
+    variants = [parse_variant(v) for v in a.variant]
+    if len({v.name for v in variants}) < len(variants):
+        p.error("every --variant needs a name of its own")
+    with tempfile.TemporaryDirectory(prefix="ab-turns-") as scratch:
+        sets = [parse_set(s, Path(scratch), a.sets_dir) for s in a.set or ["sim:15:25:20"]]
+        load = os.getloadavg()[0]
+        began = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+        times, digests = run_turns(variants, sets, a.rounds, a.passes)
+    print(
+        f"{began}, {a.rounds} rounds of {a.passes} passes, load average {load:.2f} at the "
+        f"start and {os.getloadavg()[0]:.2f} at the end; CPU us a trace, match + GeoJSON\n"
+    )
+    print(report(variants, sets, times, digests))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,60 @@
+"""benchmarks/ab_turns.py: versions of the matcher timed in turns, their documents compared."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tests.benchmarks.scripts import load_script
+
+ab_turns = load_script("ab_turns.py")
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_two_variants_of_one_tree_take_turns_and_write_the_same_documents(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    code = ab_turns.main(
+        [
+            "--variant", f"base={ROOT}",
+            "--variant", f"again={ROOT}:MAPMATCH_AB_TURNS_TEST=1",
+            "--set", "sim:15:6:2",
+            "--rounds", "2",
+            "--passes", "1",
+        ]
+    )  # fmt: skip
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "2 rounds of 1 passes" in out
+    rows = [line.split("|")[1:-1] for line in out.splitlines() if line.startswith("| sim:")]
+    assert [r[1].strip() for r in rows] == ["base", "again"]
+    assert float(rows[0][2]) > 0
+    assert float(rows[1][2]) > 0
+    ratio = float(rows[1][3].split()[0])
+    assert 0.2 < ratio < 5
+    assert rows[1][4].strip() == "equal"  # the same code: the same documents
+    assert rows[0][4].strip().startswith("`")
+
+
+def test_variants_and_sets_are_read_or_refused_with_what_to_write(tmp_path: Path) -> None:
+    v = ab_turns.parse_variant(f"new={ROOT}:NUMBA_OPT=2,OTHER=x")
+    assert (v.name, v.tree, v.env) == ("new", ROOT, {"NUMBA_OPT": "2", "OTHER": "x"})
+    with pytest.raises(SystemExit, match="write NAME=TREE"):
+        ab_turns.parse_variant(str(ROOT))
+    with pytest.raises(SystemExit, match="write KEY=VALUE"):
+        ab_turns.parse_variant(f"new={ROOT}:NUMBA_OPT")
+    with pytest.raises(SystemExit, match="holds no mapmatch package"):
+        ab_turns.parse_variant(f"new={tmp_path}")
+    with pytest.raises(SystemExit, match="write EXTRACT:SET:INPUT or sim:"):
+        ab_turns.parse_set("krems", tmp_path)
+    with pytest.raises(SystemExit, match=r"compare_peers\.py writes the peer sets"):
+        ab_turns.parse_set("nowhere_2000:15s_10m:positions", tmp_path)
+
+
+def test_a_document_is_compared_without_its_timings() -> None:
+    a = b'{"stats":{"points":2,"timings_s":{"total":0.001}},"features":[]}'
+    b = b'{"stats":{"points":2,"timings_s":{"total":0.002}},"features":[]}'
+    c = b'{"stats":{"points":3,"timings_s":{"total":0.001}},"features":[]}'
+    assert ab_turns._without_timings(a) == ab_turns._without_timings(b)
+    assert ab_turns._without_timings(a) != ab_turns._without_timings(c)
