@@ -104,8 +104,12 @@ def _extract_file(stem: str) -> str:
 def parse_set(text: str, scratch: Path, sets_dir: Path = SETS) -> TraceSet:
     """A peer set (``EXTRACT:SET:INPUT``) or simulated traces (``sim:INTERVAL:FIXES:TRACES``)."""
     parts = text.split(":")
+    bad = f"bad --set {text!r}; write EXTRACT:SET:INPUT or sim:INTERVAL:FIXES:TRACES[:EXTRACT]"
     if parts[0] == "sim" and len(parts) in (4, 5):
-        interval, fixes, count = float(parts[1]), int(parts[2]), int(parts[3])
+        try:
+            interval, fixes, count = float(parts[1]), int(parts[2]), int(parts[3])
+        except ValueError as exc:
+            raise SystemExit(bad) from exc
         extract = _extract_file(parts[4]) if len(parts) == 5 else None
         path = scratch / f"sim-{len(list(scratch.iterdir()))}.csv"
         _write_simulated(path, extract, interval, fixes, count)
@@ -116,10 +120,13 @@ def parse_set(text: str, scratch: Path, sets_dir: Path = SETS) -> TraceSet:
         if not path.is_file():
             msg = f"no trace file {path} (benchmarks/compare_peers.py writes the peer sets)"
             raise SystemExit(msg)
-        noise = float(label.split("_")[1].rstrip("m"))
+        try:  # INTERVALs_NOISEm, as compare_peers.py names its sets
+            noise = float(label.split("_")[1].removesuffix("m"))
+        except (IndexError, ValueError) as exc:
+            msg = f"--set {text!r}: a peer set is named INTERVALs_NOISEm, e.g. 15s_10m"
+            raise SystemExit(msg) from exc
         return TraceSet(text, str(path), _extract_file(stem), noise)
-    msg = f"bad --set {text!r}; write EXTRACT:SET:INPUT or sim:INTERVAL:FIXES:TRACES[:EXTRACT]"
-    raise SystemExit(msg)
+    raise SystemExit(bad)
 
 
 def _write_simulated(

@@ -48,6 +48,12 @@ def test_variants_and_sets_are_read_or_refused_with_what_to_write(tmp_path: Path
         ab_turns.parse_variant(f"new={tmp_path}")
     with pytest.raises(SystemExit, match="write EXTRACT:SET:INPUT or sim:"):
         ab_turns.parse_set("krems", tmp_path)
+    with pytest.raises(SystemExit, match="write EXTRACT:SET:INPUT or sim:"):
+        ab_turns.parse_set("sim:fast:25:20", tmp_path)
+    (tmp_path / "krems_at_2013" / "15s").mkdir(parents=True)
+    (tmp_path / "krems_at_2013" / "15s" / "positions.csv").write_text("trace_id,time,lon,lat\n")
+    with pytest.raises(SystemExit, match="named INTERVALs_NOISEm"):
+        ab_turns.parse_set("krems_at_2013:15s:positions", tmp_path, tmp_path)
     with pytest.raises(SystemExit, match=r"compare_peers\.py writes the peer sets"):
         ab_turns.parse_set("nowhere_2000:15s_10m:positions", tmp_path)
 
