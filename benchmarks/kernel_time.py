@@ -11,8 +11,11 @@ kernel ran on another trace's arguments (its code warm, this trace's data not), 
 with the same arguments, the fastest of ``--warm`` calls in a row (code, data and the branch
 history all warm: a floor no real trace sees). In the flow a kernel starts cold (the match's
 other kernels, the interpreter and the trace's data have run since its last call); the
-columns say by how much, and whether its code or what it reads is the cost. Times are
-wall-clock microseconds a trace on one thread (the machine may be shared: run it twice).
+columns say by how much, and whether its code or what it reads is the cost. Last, the whole
+pass's calls are made again in their order, one right after another with no Python between
+them (the fastest of ``--passes`` replays, crossings into the kernels included): what the
+matches would take if the Python between the kernels cost nothing. Times are wall-clock
+microseconds a trace on one thread (the machine may be shared: run it twice).
 
 The traces: ``--traces`` simulated trips on the extract, ``--fixes`` fixes each at
 ``--interval`` (heading and speed given, 2 % outliers of 40 m), or every trace of ``--csv``
@@ -117,6 +120,17 @@ def _after_another(
     return time.perf_counter() - start
 
 
+def _replay(
+    kernels: dict[str, Callable[..., Any]], kept: list[tuple[str, tuple[Any, ...]]]
+) -> float:
+    """Seconds to make a pass's kernel calls again in their order, one right after another."""
+    calls = [(kernels[label], kernel_args) for label, kernel_args in kept]
+    start = time.perf_counter()
+    for kernel, kernel_args in calls:
+        kernel(*kernel_args)
+    return time.perf_counter() - start
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_trace_arguments(parser)
@@ -165,6 +179,8 @@ def main(argv: list[str] | None = None) -> int:
             code_warm[label] += _after_another(kernel, kernel_args, other)
             warm[label] += _again(kernel, kernel_args, max(1, args.warm))
 
+    replayed = min(_replay(kernels, kept) for _ in range(max(1, args.passes)))
+
     n = len(traces)
     points = sum(len(t.lon) for t in traces)
     us = 1e6 / n
@@ -174,7 +190,8 @@ def main(argv: list[str] | None = None) -> int:
         f"(match + GeoJSON), {in_kernels * us:.0f} in kernels called from Python, "
         f"{(total - in_kernels) * us:.0f} in the Python between them; the kernels "
         f"{sum(code_warm.values()) * us:.0f} with their code warm, "
-        f"{sum(warm.values()) * us:.0f} all warm"
+        f"{sum(warm.values()) * us:.0f} all warm, {replayed * us:.0f} replayed in the pass's "
+        "order with no Python between them"
     )
     print()
     print("| kernel | calls a trace | in the flow us | code warm us | all warm us |")
