@@ -13,8 +13,9 @@ history all warm: a floor no real trace sees). In the flow a kernel starts cold 
 other kernels, the interpreter and the trace's data have run since its last call); the
 columns say by how much, and whether its code or what it reads is the cost. Last, the whole
 pass's calls are made again in their order, one right after another with no Python between
-them (the fastest of ``--passes`` replays, crossings into the kernels included): what the
-matches would take if the Python between the kernels cost nothing. Times are wall-clock
+them (the fastest of ``--passes`` replays; the crossings into the kernels included, the
+Python that built their arguments not): what the matches would take if the Python between
+the kernels cost nothing. Times are wall-clock
 microseconds a trace on one thread (the machine may be shared: run it twice).
 
 The traces: ``--traces`` simulated trips on the extract, ``--fixes`` fixes each at
