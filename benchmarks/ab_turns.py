@@ -46,9 +46,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from kernel_time import ROOT, SHARED
+
 SETS = ROOT / ".bench" / "peers" / "sets"
-SHARED = ROOT.parent / "shared" / "data" / "osm"
 #: What a worker prints when its sets are loaded and matched once.
 READY = "ready"
 
