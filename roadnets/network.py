@@ -349,10 +349,11 @@ class RoadNetwork:
         The one :meth:`precompute_routes` made; else the one stored in the cache entry
         (memory-mapped); else one of every edge's routes within
         :data:`~roadnets.route_store.ROUTE_TABLE_BOUND_M` is built when its estimated size
-        fits :attr:`route_table_budget_mb` (and stored in the cache entry). ``None`` when
-        it does not fit; :attr:`route_table_note` says why. The matcher asks for it in the
-        background (:meth:`request_route_table`) on its first sparse trace; ``mapmatch
-        network build`` asks here, so that the first sparse match finds it ready.
+        fits :attr:`route_table_budget_mb`, or within the longest shorter bound that fits
+        (:func:`~roadnets.route_store.fitted_bound`), and stored in the cache entry. ``None``
+        when not even the shortest fits; :attr:`route_table_note` says why. The matcher asks
+        for it in the background (:meth:`request_route_table`) on its first sparse trace;
+        ``mapmatch network build`` asks here, so that the first sparse match finds it ready.
         """
         return self._route_keeper.ensure(self)
 

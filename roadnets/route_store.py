@@ -4,11 +4,13 @@ Between fixes 10 s or more apart a matcher's route searches are long, and answer
 from one table of every edge's routes within :data:`ROUTE_TABLE_BOUND_M` (FMM's UBODT idea on
 the edge-based router, :class:`~roadnets.routes.RouteTable`) is faster than searching. The
 table is built where its estimated size fits a memory budget (:data:`DEFAULT_BUDGET_MB`;
-:func:`estimate_bytes` searches a sample of the edges first) and kept in the network's cache
+:func:`estimate_bytes` searches a sample of the edges first); where the whole bound does not
+fit, with the longest of :data:`TABLE_BOUNDS_M` that does (:func:`fitted_bound`): a dense city
+keeps the routes its 15 s traces need instead of none. It is kept in the network's cache
 entry, in the folder :data:`ROUTES_FOLDER`: one ``.npy`` file per array, memory-mapped
 (copy-on-write, never written) on reading, so the processes of one machine share one copy
-through the page cache, and ``meta.json`` with the bound, the U-turn cost and a checksum of
-every file.
+through the page cache, and ``meta.json`` with the bound, the U-turn cost, the budget it was
+fitted to and a checksum of every file.
 Written into a temporary sibling folder and renamed into place, like the entry itself; a
 folder that does not match its checksums is removed and built again.
 """
@@ -40,18 +42,26 @@ __all__ = [
     "DEFAULT_BUDGET_MB",
     "ROUTES_FOLDER",
     "ROUTE_TABLE_BOUND_M",
+    "TABLE_BOUNDS_M",
     "THREAD_NAME",
     "TableKeeper",
     "build_table",
     "estimate_bytes",
+    "fitted_bound",
     "read_table",
     "table_bytes",
     "write_table",
 ]
 
-#: Route length (plus U-turn costs) the table holds from every edge: the matcher's searches
-#: after a 30 s step reach about 1,500 m (``route_factor`` x the step + ``route_slack_m``).
-ROUTE_TABLE_BOUND_M = 2000.0
+#: Route lengths (plus U-turn costs) a table may hold from every edge, longest first: the
+#: longest whose table fits the budget is built. The matcher's searches after a 30 s step
+#: reach about 1,500 m (``route_factor`` x the step + ``route_slack_m``), after a 15 s step in
+#: a city 600-800 m; a trace is answered from the table when all its steps' searches fit in
+#: its bound. Baltimore's 874 MB at 2,000 m are 266 MB at 1,000 m and 215 MB at 900 m; below
+#: 500 m a table would serve few sparse traces.
+TABLE_BOUNDS_M = (2000.0, 1750.0, 1500.0, 1250.0, 1100.0, 1000.0, 900.0, 800.0, 700.0, 600.0, 500.0)
+#: The longest of :data:`TABLE_BOUNDS_M`: what a table holds where it fits the budget.
+ROUTE_TABLE_BOUND_M = TABLE_BOUNDS_M[0]
 
 #: Largest table built without being asked (MB): Andorra's 5,625 edges need 51 MB at
 #: 2,000 m, Liechtenstein's 117 MB, the 200,000-edge grid city of bench_match.py about 17 GB
@@ -107,6 +117,31 @@ def estimate_bytes(
     return int(per_source * n * _RECORD_BYTES + 8 * (n + 1))
 
 
+def fitted_bound(
+    arrays: NetworkArrays,
+    turns: TurnGraph,
+    budget_bytes: float,
+    *,
+    uturn_cost_m: float,
+    longer_than_m: float = 0.0,
+) -> tuple[float, int]:
+    """
+    The longest bound of :data:`TABLE_BOUNDS_M` whose table fits ``budget_bytes``, and its size.
+
+    Estimated (:func:`estimate_bytes`) from the longest bound down, stopping at the first that
+    fits; bounds not longer than ``longer_than_m`` are not tried. Where none fits, the bound is
+    NaN and the size the last one estimated (the shortest tried; 0 when none was).
+    """
+    size = 0
+    for bound in TABLE_BOUNDS_M:
+        if bound <= longer_than_m:
+            break
+        size = estimate_bytes(arrays, turns, bound, uturn_cost_m=uturn_cost_m)
+        if size <= budget_bytes:
+            return bound, size
+    return float("nan"), size
+
+
 def build_table(
     arrays: NetworkArrays, turns: TurnGraph, bound_m: float, *, uturn_cost_m: float
 ) -> RouteTable:
@@ -119,9 +154,16 @@ def build_table(
     return table
 
 
-def write_table(entry: Path, table: RouteTable) -> None:
+def write_table(
+    entry: Path, table: RouteTable, budget_mb: float = float("inf"), *, replace: bool = False
+) -> None:
     """
     Store a table of every edge's routes (one bound) in a cache entry, atomically.
+
+    ``budget_mb`` is the budget its bound was fitted to (:func:`fitted_bound`; infinite: none),
+    so that a larger budget later builds one with a longer bound; ``replace`` puts it in the
+    place of the stored one (which processes that mapped it go on reading), else a stored one
+    is kept.
 
     Raises
     ------
@@ -136,25 +178,37 @@ def write_table(entry: Path, table: RouteTable) -> None:
             sums[name] = file_checksum(tmp / f"{name}.npy")
         meta = {
             "format": _FORMAT,
-            "bound_m": float(table.bounds_m.min(initial=np.inf)),
+            "bound_m": _bound(table),
             "uturn_cost_m": table.uturn_cost_m,
+            "budget_mb": budget_mb if np.isfinite(budget_mb) else None,
             "edges": len(table.sources),
             "checksums": sums,
         }
         (tmp / "meta.json").write_text(json.dumps(meta), encoding="utf-8")
+        if replace:
+            _retire(entry / ROUTES_FOLDER)
         put_in_place(tmp, entry / ROUTES_FOLDER)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
+def _retire(folder: Path) -> None:
+    """Move a stored table's folder out of its place and remove it (gone already: nothing)."""
+    old = Path(tempfile.mkdtemp(prefix=f".{ROUTES_FOLDER}-old-", dir=folder.parent))
+    with contextlib.suppress(OSError):  # another process moved it first
+        folder.rename(old / ROUTES_FOLDER)
+    shutil.rmtree(old, ignore_errors=True)
+
+
 def read_table(
-    entry: Path, turns: TurnGraph, *, bound_m: float, uturn_cost_m: float
+    entry: Path, turns: TurnGraph, *, bounds_m: tuple[float, ...], uturn_cost_m: float
 ) -> RouteTable | None:
     """
     The stored table of a cache entry (memory-mapped), or ``None``.
 
-    ``None`` when there is none, or it was built with another bound or U-turn cost, or for
-    another network; a folder that is corrupt is removed (and so built again).
+    ``None`` when there is none, or it was built with a bound not in ``bounds_m`` or another
+    U-turn cost, or for another network; a folder that is corrupt is removed (and so built
+    again).
     """
     from roadnets.routes import RouteTable
 
@@ -166,7 +220,7 @@ def read_table(
         meta = json.loads(meta_path.read_text(encoding="utf-8"))
         if (
             meta.get("format") != _FORMAT
-            or meta["bound_m"] != bound_m
+            or meta["bound_m"] not in bounds_m
             or meta["uturn_cost_m"] != uturn_cost_m
         ):
             return None
@@ -204,6 +258,20 @@ def read_table(
     )
     table._index.extend(loaded[name] for name in _INDEX_ARRAYS)  # stored with it
     return table
+
+
+def stored_budget_mb(entry: Path) -> float:
+    """
+    The budget the stored table's bound was fitted to (infinite: its bound is the longest).
+
+    Read from its ``meta.json``; tables stored before budgets were kept hold the longest bound.
+    """
+    try:
+        meta = json.loads((entry / ROUTES_FOLDER / "meta.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return float("inf")
+    budget = meta.get("budget_mb")
+    return float("inf") if budget is None else float(budget)
 
 
 def _array(table: RouteTable, name: str) -> np.ndarray[Any, Any]:
@@ -284,30 +352,47 @@ def _provide(net: RoadNetwork, keeper: TableKeeper) -> str:
     if net.precomputed_routes is not None:
         return _GIVEN
     entry = Path(net.cache_entry) if net.cache_entry is not None else None
-    bound, cost = ROUTE_TABLE_BOUND_M, DEFAULT_UTURN_COST_M
+    cost = DEFAULT_UTURN_COST_M
+    budget = net.route_table_budget_mb
     found = None
     if entry is not None:
-        found = read_table(entry, net.turns, bound_m=bound, uturn_cost_m=cost)
-    if found is not None:
-        return _attach(net, keeper, found, stored=True, how="read from the cache entry")
-    budget = net.route_table_budget_mb
+        found = read_table(entry, net.turns, bounds_m=TABLE_BOUNDS_M, uturn_cost_m=cost)
+    longer_than = 0.0
+    if found is not None and entry is not None:
+        reach = _bound(found)
+        if reach >= ROUTE_TABLE_BOUND_M or not budget > stored_budget_mb(entry):
+            return _attach(net, keeper, found, stored=True, how="read from the cache entry")
+        longer_than = reach  # fitted to a smaller budget than today's: a longer bound may fit
     if budget <= 0:
         return "none: route_table_budget_mb is 0"
-    size = estimate_bytes(net.arrays, net.turns, bound, uturn_cost_m=cost)
-    if size > budget * 1e6:
-        return f"none: about {size / 1e6:,.1f} MB, over the {budget:g} MB budget"
+    bound, size = fitted_bound(
+        net.arrays, net.turns, budget * 1e6, uturn_cost_m=cost, longer_than_m=longer_than
+    )
+    if found is not None and np.isnan(bound):  # the stored one is still the longest that fits
+        return _attach(net, keeper, found, stored=True, how="read from the cache entry")
+    if np.isnan(bound):
+        return (
+            f"none: about {size / 1e6:,.1f} MB even for routes within {TABLE_BOUNDS_M[-1]:,.0f} m, "
+            f"over the {budget:g} MB budget"
+        )
     table = build_table(net.arrays, net.turns, bound, uturn_cost_m=cost)
     if entry is None:
         return _attach(net, keeper, table, stored=False, how="built (no cache entry to keep it)")
     try:
-        write_table(entry, table)
+        fitted_to = budget if bound < ROUTE_TABLE_BOUND_M else float("inf")
+        write_table(entry, table, fitted_to, replace=found is not None)
     except OSError as exc:
         how = f"built, not stored ({exc})"
         return _attach(net, keeper, table, stored=False, how=how)
-    stored = read_table(entry, net.turns, bound_m=bound, uturn_cost_m=cost)
+    stored = read_table(entry, net.turns, bounds_m=(bound,), uturn_cost_m=cost)
     if stored is None:  # removed in between: keep the one in memory
         return _attach(net, keeper, table, stored=False, how="built, not stored")
     return _attach(net, keeper, stored, stored=True, how="built and stored in the cache entry")
+
+
+def _bound(table: RouteTable) -> float:
+    """The bound every source of a table was searched with (the table's reach)."""
+    return float(table.bounds_m.min(initial=np.inf))
 
 
 def _attach(
@@ -317,7 +402,8 @@ def _attach(
         return _GIVEN
     net.precomputed_routes = table
     keeper.stored = stored
-    return f"{how}: {table_bytes(table) / 1e6:,.0f} MB, routes within {ROUTE_TABLE_BOUND_M:,.0f} m"
+    reach = _bound(table)
+    return f"{how}: {table_bytes(table) / 1e6:,.0f} MB, routes within {reach:,.0f} m"
 
 
 def table_bytes(table: RouteTable) -> int:

@@ -43,9 +43,10 @@ def add_parser(sub: Any) -> None:
         type=_megabytes,
         default=DEFAULT_BUDGET_MB,
         metavar="MB",
-        help="build: also build the route table sparse traces are matched with, when its "
-        f"estimated size fits this many MB (default {DEFAULT_BUDGET_MB:.0f}; 0: none; building it "
-        "takes about twice its size for a moment)",
+        help="build: also build the route table sparse traces are matched with, within "
+        "the longest reach (2,000 m down to 500 m) whose estimated size fits this many MB "
+        f"(default {DEFAULT_BUDGET_MB:.0f}; 0: none; building it takes about twice its size "
+        "for a moment)",
     )
     parser.set_defaults(run=run)
 

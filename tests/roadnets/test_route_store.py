@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import pickle
@@ -10,13 +11,18 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+import mapmatch
 import roadnets
-from roadnets.route_store import ROUTE_TABLE_BOUND_M, ROUTES_FOLDER
+from mapmatch.evaluation.simulate import SimulationConfig, simulate_trips
+from mapmatch.export import geojson_bytes
+from roadnets.route_store import ROUTE_TABLE_BOUND_M, ROUTES_FOLDER, estimate_bytes
+from roadnets.turns import DEFAULT_UTURN_COST_M
 
 if TYPE_CHECKING:
     import pytest
 
 OAKLAND = Path(__file__).parents[1] / "data" / "west-oakland_us.osm.bz2"
+MONACO = Path(roadnets.__file__).parent / "data" / "monaco_2020.osm.pbf"
 
 
 def _pairs(net: roadnets.RoadNetwork) -> tuple[np.ndarray, np.ndarray]:
@@ -58,7 +64,7 @@ def test_a_table_over_the_budget_is_not_built_and_the_note_says_why(tmp_path: Pa
     net = roadnets.load(OAKLAND, cache_dir=tmp_path)
     net.route_table_budget_mb = 0.01
     assert net.sparse_route_table() is None
-    assert "MB, over the 0.01 MB budget" in net.route_table_note
+    assert "MB even for routes within 500 m, over the 0.01 MB budget" in net.route_table_note
     assert net.cache_entry is not None
     assert not (Path(net.cache_entry) / ROUTES_FOLDER).exists()
 
@@ -120,3 +126,72 @@ def test_a_forked_child_looks_for_the_table_afresh() -> None:
     assert os.waitstatus_to_exitcode(status) == 0
     assert report == "False|not looked for yet"
     assert net.route_table_requested  # the parent's own is untouched
+
+
+def _budget_between(net: roadnets.RoadNetwork, shorter: float, longer: float) -> float:
+    """A budget (MB) that holds the table of ``shorter`` but not the one of ``longer``."""
+    sizes = [
+        estimate_bytes(net.arrays, net.turns, bound, uturn_cost_m=DEFAULT_UTURN_COST_M)
+        for bound in (shorter, longer)
+    ]
+    assert sizes[0] < sizes[1]
+    return (sizes[0] + sizes[1]) / 2e6
+
+
+def test_a_budget_short_of_the_longest_bound_keeps_the_longest_that_fits(tmp_path: Path) -> None:
+    net = roadnets.load(MONACO, cache_dir=tmp_path)
+    budget = _budget_between(net, 1000.0, 1100.0)
+    net.route_table_budget_mb = budget
+    table = net.sparse_route_table()
+    assert table is not None
+    assert float(table.bounds_m.min()) == 1000.0
+    assert net.route_table_note.startswith("built and stored in the cache entry: ")
+    assert net.route_table_note.endswith("MB, routes within 1,000 m")
+
+    # the next process with the same budget (or a smaller one) reads it
+    for later in (budget, 1.0, 0.0):
+        again = roadnets.load(MONACO, cache_dir=tmp_path)
+        again.route_table_budget_mb = later
+        read = again.sparse_route_table()
+        assert read is not None
+        assert float(read.bounds_m.min()) == 1000.0
+        assert again.route_table_note.startswith("read from the cache entry: ")
+
+    # a larger budget: the longest bound that fits it now is built in its place, and kept
+    larger = roadnets.load(MONACO, cache_dir=tmp_path)
+    larger.route_table_budget_mb = _budget_between(larger, 1500.0, 1750.0)
+    wider = larger.sparse_route_table()
+    assert wider is not None
+    assert float(wider.bounds_m.min()) == 1500.0
+    assert larger.route_table_note.startswith("built and stored in the cache entry: ")
+    unbounded = roadnets.load(MONACO, cache_dir=tmp_path)
+    unbounded.route_table_budget_mb = 10_000.0
+    longest = unbounded.sparse_route_table()
+    assert longest is not None
+    assert float(longest.bounds_m.min()) == ROUTE_TABLE_BOUND_M
+    for later in (10_000.0, 1.0):  # the longest bound is read whatever the budget
+        again = roadnets.load(MONACO, cache_dir=tmp_path)
+        again.route_table_budget_mb = later
+        assert again.sparse_route_table() is not None
+        assert again.route_table_note.startswith("read from the cache entry: ")
+        assert again.route_table_note.endswith("routes within 2,000 m")
+
+
+def test_sparse_traces_match_the_same_with_a_shorter_table_as_with_searches() -> None:
+    with_table = roadnets.load(MONACO, use_cache=False)
+    with_table.route_table_budget_mb = _budget_between(with_table, 800.0, 900.0)
+    table = with_table.sparse_route_table()
+    assert table is not None
+    assert float(table.bounds_m.min()) == 800.0
+    searching = roadnets.load(MONACO, use_cache=False)
+    searching.route_table_budget_mb = 0.0
+    assert searching.sparse_route_table() is None
+    for interval, seed in ((15.0, 5), (30.0, 6)):  # 15 s steps fit in 800 m, 30 s ones not all
+        cfg = SimulationConfig(interval_s=interval, noise_m=10.0, route_length_m=4000.0)
+        for trip in simulate_trips(searching, cfg, count=4, seed=seed):
+            documents = []
+            for net in (with_table, searching):
+                document = json.loads(geojson_bytes(mapmatch.match(trip.trace, net)))
+                document["stats"].pop("timings_s")
+                documents.append(document)
+            assert documents[0] == documents[1]
