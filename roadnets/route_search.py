@@ -435,6 +435,24 @@ def _clear_slots(from_edge, slot):  # type: ignore[no-untyped-def]  # pragma: no
 
 
 @njit(cache=True, nogil=True)
+def searches_within(from_edge, bounds, limit, slot):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    Whether the search each ``(from, to)`` pair's route comes from runs within ``limit``.
+
+    A search runs per distinct ``from`` edge with the largest bound of its pairs
+    (:func:`group_pairs`), so a table of every route within ``limit`` answers exactly those
+    pairs as the searches would (:func:`table_routes`), and the others are searched alone with
+    the same bounds. ``slot`` as in :func:`table_routes` (-1 throughout, left so).
+    """
+    largest = _largest_bounds(from_edge, bounds, slot)
+    within = np.empty(len(from_edge), dtype=np.bool_)
+    for i in range(len(from_edge)):
+        within[i] = largest[slot[from_edge[i]]] <= limit
+    _clear_slots(from_edge, slot)
+    return within
+
+
+@njit(cache=True, nogil=True)
 def table_routes(table, state_edge, from_edge, to_edge, bounds, uturn_cost, slot):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
     Routes of ``(from, to)`` edge pairs from a complete table, as bounded searches would find them.

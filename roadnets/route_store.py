@@ -56,8 +56,8 @@ __all__ = [
 #: Route lengths (plus U-turn costs) a table may hold from every edge, longest first: the
 #: longest whose table fits the budget is built. The matcher's searches after a 30 s step
 #: reach about 1,500 m (``route_factor`` x the step + ``route_slack_m``), after a 15 s step in
-#: a city 600-800 m; a trace is answered from the table when all its steps' searches fit in
-#: its bound. Baltimore's 874 MB at 2,000 m are estimated 266 MB at 1,000 m and 222 MB at
+#: a city 600-800 m; the pairs whose searches fit in the table's bound are answered from it,
+#: the others searched. Baltimore's 874 MB at 2,000 m are estimated 266 MB at 1,000 m and 222 MB at
 #: 900 m (built: 228 MB); below 500 m a table would serve few sparse traces.
 TABLE_BOUNDS_M = (2000.0, 1750.0, 1500.0, 1250.0, 1100.0, 1000.0, 900.0, 800.0, 700.0, 600.0, 500.0)
 #: The longest of :data:`TABLE_BOUNDS_M`: what a table holds where it fits the budget.

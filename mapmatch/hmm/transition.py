@@ -54,7 +54,7 @@ from mapmatch.hmm.routes import (
     held_behind,
     uturn_route,
 )
-from roadnets.route_search import route_pairs_kernel, table_routes
+from roadnets.route_search import route_pairs_kernel, searches_within, table_routes
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -62,6 +62,9 @@ if TYPE_CHECKING:
     from roadnets import RoadNetwork
 
 __all__ = [
+    "ROUTES_FROM_TABLE",
+    "ROUTES_MIXED",
+    "ROUTES_SEARCHED",
     "TABLE_FROM_MEAN_BOUND_M",
     "TRAVEL_CHORD_SHARE",
     "driving_on_explains",
@@ -261,8 +264,9 @@ def uturn_penalties(
 #: Mean search bound (m) of a trace's steps from which it asks the network for its route
 #: table (built in the background, within the memory budget): a sparse trace, whose searches
 #: the table answers 1.2-1.9 times faster (15-30 s). Once there, the table answers every pair
-#: whose bound fits: with its hashed look-ups (:mod:`roadnets.record_index`) within a few per
-#: cent of the searches at 1 s (0.94-1.04x), so a dense trace uses it too but never asks for it.
+#: whose search fits in its bound (:func:`_pair_routes`): with its hashed look-ups
+#: (:mod:`roadnets.record_index`) within a few per cent of the searches at 1 s (0.94-1.04x), so
+#: a dense trace uses it too but never asks for it.
 TABLE_FROM_MEAN_BOUND_M = 400.0
 
 
@@ -282,47 +286,96 @@ def wants_table(bounds_m):  # type: ignore[no-untyped-def]  # pragma: no cover -
     return len(bounds_m) > 0 and total >= TABLE_FROM_MEAN_BOUND_M * len(bounds_m)
 
 
+#: Where :func:`_pair_routes` took a trellis's routes from: searches, the route table, or both
+#: (the pairs whose searches fit in the table's bound from it, the others searched; their
+#: records told apart by :func:`table_record`).
+ROUTES_SEARCHED, ROUTES_FROM_TABLE, ROUTES_MIXED = 0, 1, 2
+
+
+@njit(cache=True, nogil=True, inline="always")
+def table_record(rec):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """The table's record a pair's ``rec`` of :data:`ROUTES_MIXED` routes names (-1: a search's)."""
+    return -2 - rec if rec <= -2 else -1
+
+
 @njit(cache=True, nogil=True)
 def _pair_routes(graph, ws, scratch, uturn_cost_m, table, from_edge, to_edge, bounds):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
-    Routes of edge pairs: from the precomputed table when every bound fits in it, else searched.
+    Routes of edge pairs: from the precomputed table where their searches fit in it, else searched.
 
-    Returns whether the table answered, the searches' output of
-    :func:`~roadnets.route_search.route_pairs_kernel` (empty then) and per pair its record,
-    length, time, U-turns and the edge it drives onto its target edge from: the route's last
-    edge before the target, ``from_edge`` when the target follows at once,
-    :data:`~mapmatch.hmm.routes.ARRIVAL_UNKNOWN` without a route.
+    Returns where they came from (:data:`ROUTES_SEARCHED`, :data:`ROUTES_FROM_TABLE` or
+    :data:`ROUTES_MIXED`), the searches' output of
+    :func:`~roadnets.route_search.route_pairs_kernel` (empty when none ran) and per pair its
+    record (a search's, else the table's; with both, a table record ``r`` is written ``-2 - r``,
+    :func:`table_record`), length, time, U-turns and the edge it drives onto its target edge
+    from: the route's last edge before the target, ``from_edge`` when the target follows at
+    once, :data:`~mapmatch.hmm.routes.ARRIVAL_UNKNOWN` without a route. Where some pairs' searches
+    fit in the table and others not, each pair gets the route the searches of all would give
+    it (:func:`~roadnets.route_search.searches_within`): the table is a speed-up, never a
+    change of answer.
     """
     t_bound, t_sources, t_ptr, t_state, t_index, t_dist, t_time, t_turns, copy_ptr, copy_state = (
         table[:10]
     )
-    fits = t_bound > -np.inf  # no table (bound -inf) never fits, even with no pairs
-    for k in range(len(bounds)):
-        fits = fits and bounds[k] <= t_bound
     state_edge = graph[2]
-    if fits:
-        columns = (t_sources, t_ptr, t_state, t_index, t_dist, t_time, t_turns, table[10],
-                   copy_ptr, copy_state)  # fmt: skip
+    n = len(bounds)
+    columns = (t_sources, t_ptr, t_state, t_index, t_dist, t_time, t_turns, table[10],
+               copy_ptr, copy_state)  # fmt: skip
+    within = np.zeros(n, dtype=np.bool_)
+    n_within = 0
+    if t_bound > -np.inf:  # no table (bound -inf) answers nothing, even with no pairs
+        within = searches_within(from_edge, bounds, t_bound, scratch[0])
+        for k in range(n):
+            n_within += within[k]
+    e_i, e_f = np.empty(0, dtype=np.int64), np.empty(0)
+    if t_bound > -np.inf and n_within == n:
         rec, dist, time, turns, arrival = table_routes(
             columns, state_edge, from_edge, to_edge, bounds, uturn_cost_m, scratch[0]
         )
-        e_i, e_f = np.empty(0, dtype=np.int64), np.empty(0)
         searched = (
             e_i, e_f, e_i, np.empty(0, dtype=np.int32), e_f, e_f, np.empty(0, dtype=np.int16),
             e_i, e_i, e_i, e_i,
         )  # fmt: skip
-        return True, searched, rec, dist, time, turns, arrival
-    out = route_pairs_kernel(graph, from_edge, to_edge, bounds, uturn_cost_m, ws, scratch)
+        return ROUTES_FROM_TABLE, searched, rec, dist, time, turns, arrival
+    if n_within == 0:
+        out = route_pairs_kernel(graph, from_edge, to_edge, bounds, uturn_cost_m, ws, scratch)
+        searched = out[:11]
+        rec = out[11]
+        arrival = np.full(len(rec), ARRIVAL_UNKNOWN, dtype=np.int64)
+        pred, state = searched[7], searched[3]
+        for k in range(len(rec)):
+            r = rec[k]
+            if r >= 0:
+                p = pred[r]
+                arrival[k] = from_edge[k] if p < 0 else state_edge[state[p]]
+        return ROUTES_SEARCHED, searched, rec, out[12], out[13], out[14], arrival
+    on_table = np.flatnonzero(within)
+    apart = np.flatnonzero(~within)
+    out = route_pairs_kernel(
+        graph, from_edge[apart], to_edge[apart], bounds[apart], uturn_cost_m, ws, scratch
+    )
     searched = out[:11]
-    rec = out[11]
-    arrival = np.full(len(rec), ARRIVAL_UNKNOWN, dtype=np.int64)
     pred, state = searched[7], searched[3]
-    for k in range(len(rec)):
-        r = rec[k]
+    rec = np.full(n, -1, dtype=np.int64)
+    dist, time = np.full(n, np.inf), np.full(n, np.inf)
+    turns = np.zeros(n, dtype=np.int64)
+    arrival = np.full(n, ARRIVAL_UNKNOWN, dtype=np.int64)
+    for m in range(len(apart)):
+        k = apart[m]
+        r = out[11][m]
+        rec[k], dist[k], time[k], turns[k] = r, out[12][m], out[13][m], out[14][m]
         if r >= 0:
             p = pred[r]
             arrival[k] = from_edge[k] if p < 0 else state_edge[state[p]]
-    return False, searched, rec, out[12], out[13], out[14], arrival
+    t_rec, t_dist, t_time, t_turns_out, t_arrival = table_routes(
+        columns, state_edge, from_edge[on_table], to_edge[on_table], bounds[on_table],
+        uturn_cost_m, scratch[0],
+    )  # fmt: skip
+    for m in range(len(on_table)):
+        k = on_table[m]
+        rec[k] = -2 - t_rec[m] if t_rec[m] >= 0 else -1
+        dist[k], time[k], turns[k], arrival[k] = t_dist[m], t_time[m], t_turns_out[m], t_arrival[m]
+    return ROUTES_MIXED, searched, rec, dist, time, turns, arrival
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -34,7 +34,13 @@ from mapmatch.hmm.params import (
 from mapmatch.hmm.pathwalk import EPS_M
 from mapmatch.hmm.routes import ARRIVAL_HELD, pairs_kernel, search_bound
 from mapmatch.hmm.solution import Solution
-from mapmatch.hmm.transition import transitions_kernel, wants_table
+from mapmatch.hmm.transition import (
+    ROUTES_FROM_TABLE,
+    ROUTES_SEARCHED,
+    table_record,
+    transitions_kernel,
+    wants_table,
+)
 from mapmatch.hmm.viterbi import _posterior_kernel, viterbi_arrivals_kernel
 
 if TYPE_CHECKING:
@@ -287,10 +293,14 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     piece_lo, piece_hi = _pieces(states, starts)
     post = _posterior_kernel(em_pad, tr_pad, piece_lo, piece_hi)
     # the routes' records, their states and predecessors: each pair's route edge by edge
-    if fits:
+    if fits == ROUTES_FROM_TABLE:
         r_state, r_pred = table[3], table[10]
-    else:
+    elif fits == ROUTES_SEARCHED:
         r_state, r_pred = searched[3], searched[7].astype(np.int32)
+    else:
+        rec, r_state, r_pred = _merged_records(
+            rec, states, pair, searched[3], searched[7], table[3], table[10]
+        )
     return (
         (ptr, edge, off, dist, cx, cy, bear),
         states, piece_lo, piece_hi, post, kinds, em_pad, tr_pad,
@@ -298,6 +308,54 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
         wants_table(step_bounds),
         course, pace,
     )  # fmt: skip
+
+
+@njit(cache=True, nogil=True)
+def _merged_records(rec, states, pair, s_state, s_pred, t_state, t_pred):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    One record space for routes that came from searches and from the table (``ROUTES_MIXED``).
+
+    The searches' records, then the table's routes of the chosen path's pairs, each followed
+    back to its source and numbered anew: what the path walk reads (it walks the chosen pairs'
+    routes only). Returns each pair's record in it (-1 for the table's routes of pairs off the
+    path), and the records' states and predecessors.
+    """
+    steps = len(states) - 1
+    chosen = np.full(max(steps, 0), -1, dtype=np.int64)  # each step's chosen pair
+    extra = 0
+    for t in range(steps):
+        i, j = states[t], states[t + 1]
+        if i < 0 or j < 0 or pair[t, i, j] == -1:
+            continue
+        k = pair[t, i, j]
+        k = -2 - k if k <= -2 else k  # a held arrival's pair
+        chosen[t] = k
+        r = table_record(rec[k])
+        while r >= 0:
+            extra += 1
+            r = t_pred[r]
+    m = len(s_state)
+    state = np.empty(m + extra, dtype=np.int32)
+    pred = np.empty(m + extra, dtype=np.int32)
+    for r in range(m):
+        state[r], pred[r] = s_state[r], s_pred[r]
+    out = rec.copy()
+    for k in range(len(out)):
+        if out[k] <= -2:
+            out[k] = -1
+    at = m
+    for t in range(steps):
+        k = chosen[t]
+        r = table_record(rec[k]) if k >= 0 else -1
+        if r < 0:
+            continue
+        out[k] = at
+        while r >= 0:
+            state[at] = t_state[r]
+            r = t_pred[r]
+            pred[at] = at + 1 if r >= 0 else -1
+            at += 1
+    return out, state, pred
 
 
 def solve(

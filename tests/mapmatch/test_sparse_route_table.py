@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -11,6 +12,7 @@ from mapmatch.evaluation.simulate import SimulationConfig, simulate_trip
 from mapmatch.matcher import match
 
 OAKLAND = Path(__file__).parents[1] / "data" / "west-oakland_us.osm.bz2"
+MONACO = Path(roadnets.__file__).parent / "data" / "monaco_2020.osm.pbf"
 
 
 def test_a_sparse_trace_starts_the_table_and_matches_the_same_with_it(tmp_path: Path) -> None:
@@ -28,3 +30,57 @@ def test_a_sparse_trace_starts_the_table_and_matches_the_same_with_it(tmp_path: 
         assert one.matched_length_m == other.matched_length_m
         assert [s.edge.tolist() for s in one.segments] == [s.edge.tolist() for s in other.segments]
         assert np.array_equal(one.points.edge, other.points.edge)
+
+
+def _route_edges(
+    rec: int, source: str, searched: tuple[Any, ...], table: tuple[Any, ...], graph: tuple[Any, ...]
+) -> list[int]:
+    """The edges of a pair's route, read back from the records it names."""
+    if source == "table":
+        state, pred = table[3], table[10]
+    else:
+        state, pred = searched[3], searched[7]
+    edges = []
+    while rec >= 0:
+        edges.append(int(graph[2][state[rec]]))
+        rec = int(pred[rec])
+    return edges
+
+
+def test_pairs_some_of_whose_searches_fit_the_table_get_the_searches_routes() -> None:
+    from mapmatch.hmm.transition import (
+        ROUTES_MIXED,
+        ROUTES_SEARCHED,
+        _pair_routes,
+        route_inputs,
+        table_record,
+    )
+
+    net = roadnets.load(MONACO, use_cache=False)
+    searching = route_inputs(net)  # no table yet
+    net.precompute_routes(800.0)
+    with_table = route_inputs(net)
+    rng = np.random.default_rng(7)
+    sources = rng.integers(0, net.arrays.n_edges, 60)
+    from_edge = np.repeat(sources, 8)  # in runs of one from edge, as a trellis's pairs are
+    to_edge = rng.integers(0, net.arrays.n_edges, len(from_edge))
+    bounds = np.repeat(rng.uniform(300.0, 1500.0, len(sources)), 8)
+    bounds[::5] = 700.0  # a source whose pairs' bounds differ: its largest decides
+    mixed = _pair_routes(*with_table, from_edge, to_edge, bounds)
+    alone = _pair_routes(*searching, from_edge, to_edge, bounds)
+    assert mixed[0] == ROUTES_MIXED
+    assert alone[0] == ROUTES_SEARCHED
+    for ours, theirs in zip(mixed[3:], alone[3:], strict=True):  # length, time, U-turns, arrival
+        assert np.array_equal(ours, theirs)
+    graph, table = with_table[0], with_table[4]
+    kinds = set()
+    for k in range(len(from_edge)):
+        r = int(mixed[2][k])
+        if table_record(r) >= 0:
+            kinds.add("table")
+            got = _route_edges(table_record(r), "table", mixed[1], table, graph)
+        else:
+            kinds.add("search" if r >= 0 else "none")
+            got = _route_edges(r, "search", mixed[1], table, graph)
+        assert got == _route_edges(int(alone[2][k]), "search", alone[1], table, graph)
+    assert kinds == {"table", "search", "none"}
