@@ -57,8 +57,8 @@ __all__ = [
 #: longest whose table fits the budget is built. The matcher's searches after a 30 s step
 #: reach about 1,500 m (``route_factor`` x the step + ``route_slack_m``), after a 15 s step in
 #: a city 600-800 m; the pairs whose searches fit in the table's bound are answered from it,
-#: the others searched. Baltimore's 874 MB at 2,000 m are estimated 266 MB at 1,000 m and 222 MB at
-#: 900 m (built: 228 MB); below 500 m a table would serve few sparse traces.
+#: the others searched. Baltimore's 874 MB at 2,000 m are estimated 266 MB at 1,000 m and
+#: 222 MB at 900 m (built: 228 MB); below 500 m a table would serve few sparse traces.
 TABLE_BOUNDS_M = (2000.0, 1750.0, 1500.0, 1250.0, 1100.0, 1000.0, 900.0, 800.0, 700.0, 600.0, 500.0)
 #: The longest of :data:`TABLE_BOUNDS_M`: what a table holds where it fits the budget.
 ROUTE_TABLE_BOUND_M = TABLE_BOUNDS_M[0]
@@ -260,7 +260,7 @@ def read_table(
     return table
 
 
-def stored_budget_mb(entry: Path) -> float:
+def _stored_budget_mb(entry: Path) -> float:
     """
     The budget the stored table's bound was fitted to (infinite: its bound is the longest).
 
@@ -360,7 +360,7 @@ def _provide(net: RoadNetwork, keeper: TableKeeper) -> str:
     longer_than = 0.0
     if found is not None and entry is not None:
         reach = _bound(found)
-        if reach >= ROUTE_TABLE_BOUND_M or not budget > stored_budget_mb(entry):
+        if reach >= ROUTE_TABLE_BOUND_M or not budget > _stored_budget_mb(entry):
             return _attach(net, keeper, found, stored=True, how="read from the cache entry")
         longer_than = reach  # fitted to a smaller budget than today's: a longer bound may fit
     if budget <= 0:
