@@ -274,6 +274,31 @@ def _stored_budget_mb(entry: Path) -> float:
     return float("inf") if budget is None else float(budget)
 
 
+def _record_budget(entry: Path, budget_mb: float) -> None:
+    """
+    Note in the stored table's ``meta.json`` that ``budget_mb`` fits no longer bound either.
+
+    So that later processes with that budget read the table without estimating again; the
+    file is replaced atomically, and a failure to write it only costs them the estimate.
+    """
+    meta_path = entry / ROUTES_FOLDER / "meta.json"
+    tmp = None
+    try:
+        meta = json.loads(meta_path.read_text(encoding="utf-8"))
+        meta["budget_mb"] = budget_mb
+        fd, tmp = tempfile.mkstemp(prefix=".meta-", suffix=".json", dir=meta_path.parent)
+        with os.fdopen(fd, "w", encoding="utf-8") as out:
+            out.write(json.dumps(meta))
+        os.replace(tmp, meta_path)
+        tmp = None
+    except (OSError, ValueError) as exc:
+        _log.debug("budget of the stored route table %s not recorded: %s", meta_path, exc)
+    finally:
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+
+
 def _array(table: RouteTable, name: str) -> np.ndarray[Any, Any]:
     if name in _INDEX_ARRAYS:
         return table.index()[_INDEX_ARRAYS.index(name)]
@@ -368,7 +393,9 @@ def _provide(net: RoadNetwork, keeper: TableKeeper) -> str:
     bound, size = fitted_bound(
         net.arrays, net.turns, budget * 1e6, uturn_cost_m=cost, longer_than_m=longer_than
     )
-    if found is not None and np.isnan(bound):  # the stored one is still the longest that fits
+    if found is not None and entry is not None and np.isnan(bound):
+        # the stored one is still the longest that fits: say so for the budget, once
+        _record_budget(entry, budget)
         return _attach(net, keeper, found, stored=True, how="read from the cache entry")
     if np.isnan(bound):
         return (

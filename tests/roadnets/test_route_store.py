@@ -21,6 +21,7 @@ from roadnets.turns import DEFAULT_UTURN_COST_M
 if TYPE_CHECKING:
     import pytest
 
+
 OAKLAND = Path(__file__).parents[1] / "data" / "west-oakland_us.osm.bz2"
 MONACO = Path(roadnets.__file__).parent / "data" / "monaco_2020.osm.pbf"
 
@@ -195,3 +196,38 @@ def test_sparse_traces_match_the_same_with_a_shorter_table_as_with_searches() ->
                 document["stats"].pop("timings_s")
                 documents.append(document)
             assert documents[0] == documents[1]
+
+
+def test_a_larger_budget_that_fits_no_longer_bound_is_recorded_once(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import roadnets.route_store as store
+
+    net = roadnets.load(MONACO, cache_dir=tmp_path)
+    net.route_table_budget_mb = _budget_between(net, 1000.0, 1100.0)
+    assert net.sparse_route_table() is not None
+    assert net.cache_entry is not None
+    meta = Path(net.cache_entry) / ROUTES_FOLDER / "meta.json"
+    stored = json.loads(meta.read_text())
+    # a little more budget, still short of 1,100 m: the same table, the new budget noted
+    more = net.route_table_budget_mb * 1.01
+    again = roadnets.load(MONACO, cache_dir=tmp_path)
+    again.route_table_budget_mb = more
+    read = again.sparse_route_table()
+    assert read is not None
+    assert float(read.bounds_m.min()) == 1000.0
+    assert again.route_table_note.startswith("read from the cache entry: ")
+    noted = json.loads(meta.read_text())
+    assert noted["budget_mb"] == more
+    assert noted["checksums"] == stored["checksums"]
+    assert not [p for p in meta.parent.iterdir() if p.name.startswith(".meta-")]
+
+    def no_estimates(*args: object, **kwargs: object) -> int:
+        msg = "estimated again"
+        raise AssertionError(msg)
+
+    monkeypatch.setattr(store, "estimate_bytes", no_estimates)
+    later = roadnets.load(MONACO, cache_dir=tmp_path)
+    later.route_table_budget_mb = more
+    assert later.sparse_route_table() is not None  # read at once, no estimate
+    assert later.route_table_note.startswith("read from the cache entry: ")
