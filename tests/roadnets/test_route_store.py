@@ -139,6 +139,16 @@ def _budget_between(net: roadnets.RoadNetwork, shorter: float, longer: float) ->
     return (sizes[0] + sizes[1]) / 2e6
 
 
+def _read_back(cache: Path, budget_mb: float, bound_m: float) -> None:
+    """A later process with ``budget_mb`` reads the stored table of ``bound_m`` as it is."""
+    again = roadnets.load(MONACO, cache_dir=cache)
+    again.route_table_budget_mb = budget_mb
+    read = again.sparse_route_table()
+    assert read is not None
+    assert float(read.bounds_m.min()) == bound_m
+    assert again.route_table_note.startswith("read from the cache entry: ")
+
+
 def test_a_budget_short_of_the_longest_bound_keeps_the_longest_that_fits(tmp_path: Path) -> None:
     net = roadnets.load(MONACO, cache_dir=tmp_path)
     budget = _budget_between(net, 1000.0, 1100.0)
@@ -151,12 +161,7 @@ def test_a_budget_short_of_the_longest_bound_keeps_the_longest_that_fits(tmp_pat
 
     # the next process with the same budget (or a smaller one) reads it
     for later in (budget, 1.0, 0.0):
-        again = roadnets.load(MONACO, cache_dir=tmp_path)
-        again.route_table_budget_mb = later
-        read = again.sparse_route_table()
-        assert read is not None
-        assert float(read.bounds_m.min()) == 1000.0
-        assert again.route_table_note.startswith("read from the cache entry: ")
+        _read_back(tmp_path, later, 1000.0)
 
     # a larger budget: the longest bound that fits it now is built in its place, and kept
     larger = roadnets.load(MONACO, cache_dir=tmp_path)
@@ -211,12 +216,7 @@ def test_a_larger_budget_that_fits_no_longer_bound_is_recorded_once(
     stored = json.loads(meta.read_text())
     # a little more budget, still short of 1,100 m: the same table, the new budget noted
     more = net.route_table_budget_mb * 1.01
-    again = roadnets.load(MONACO, cache_dir=tmp_path)
-    again.route_table_budget_mb = more
-    read = again.sparse_route_table()
-    assert read is not None
-    assert float(read.bounds_m.min()) == 1000.0
-    assert again.route_table_note.startswith("read from the cache entry: ")
+    _read_back(tmp_path, more, 1000.0)
     noted = json.loads(meta.read_text())
     assert noted["budget_mb"] == more
     assert noted["checksums"] == stored["checksums"]
@@ -227,7 +227,4 @@ def test_a_larger_budget_that_fits_no_longer_bound_is_recorded_once(
         raise AssertionError(msg)
 
     monkeypatch.setattr(store, "estimate_bytes", no_estimates)
-    later = roadnets.load(MONACO, cache_dir=tmp_path)
-    later.route_table_budget_mb = more
-    assert later.sparse_route_table() is not None  # read at once, no estimate
-    assert later.route_table_note.startswith("read from the cache entry: ")
+    _read_back(tmp_path, more, 1000.0)  # at once, no estimate
