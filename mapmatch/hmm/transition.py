@@ -298,6 +298,15 @@ def table_record(rec):  # type: ignore[no-untyped-def]  # pragma: no cover - com
     return -2 - rec if rec <= -2 else -1
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _search_arrival(rec, from_edge, searched, state_edge):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """The edge a searched route (record ``rec``) drives onto its target from (none: unknown)."""
+    if rec < 0:
+        return ARRIVAL_UNKNOWN
+    before = searched[7][rec]  # the record's predecessor
+    return from_edge if before < 0 else state_edge[searched[3][before]]
+
+
 @njit(cache=True, nogil=True)
 def _pair_routes(graph, ws, scratch, uturn_cost_m, table, from_edge, to_edge, bounds):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
@@ -324,9 +333,14 @@ def _pair_routes(graph, ws, scratch, uturn_cost_m, table, from_edge, to_edge, bo
     within = np.zeros(n, dtype=np.bool_)
     n_within = 0
     if t_bound > -np.inf:  # no table (bound -inf) answers nothing, even with no pairs
-        within = searches_within(from_edge, bounds, t_bound, scratch[0])
-        for k in range(n):
-            n_within += within[k]
+        n_within = n
+        for k in range(n):  # every bound fits, a trace's usual case: no sources to group
+            if bounds[k] > t_bound:
+                within = searches_within(from_edge, bounds, t_bound, scratch[0])
+                n_within = 0
+                for i in range(n):
+                    n_within += within[i]
+                break
     e_i, e_f = np.empty(0, dtype=np.int64), np.empty(0)
     if t_bound > -np.inf and n_within == n:
         rec, dist, time, turns, arrival = table_routes(
@@ -341,13 +355,9 @@ def _pair_routes(graph, ws, scratch, uturn_cost_m, table, from_edge, to_edge, bo
         out = route_pairs_kernel(graph, from_edge, to_edge, bounds, uturn_cost_m, ws, scratch)
         searched = out[:11]
         rec = out[11]
-        arrival = np.full(len(rec), ARRIVAL_UNKNOWN, dtype=np.int64)
-        pred, state = searched[7], searched[3]
+        arrival = np.empty(len(rec), dtype=np.int64)
         for k in range(len(rec)):
-            r = rec[k]
-            if r >= 0:
-                p = pred[r]
-                arrival[k] = from_edge[k] if p < 0 else state_edge[state[p]]
+            arrival[k] = _search_arrival(rec[k], from_edge[k], searched, state_edge)
         return ROUTES_SEARCHED, searched, rec, out[12], out[13], out[14], arrival
     on_table = np.flatnonzero(within)
     apart = np.flatnonzero(~within)
@@ -355,7 +365,6 @@ def _pair_routes(graph, ws, scratch, uturn_cost_m, table, from_edge, to_edge, bo
         graph, from_edge[apart], to_edge[apart], bounds[apart], uturn_cost_m, ws, scratch
     )
     searched = out[:11]
-    pred, state = searched[7], searched[3]
     rec = np.full(n, -1, dtype=np.int64)
     dist, time = np.full(n, np.inf), np.full(n, np.inf)
     turns = np.zeros(n, dtype=np.int64)
@@ -364,9 +373,7 @@ def _pair_routes(graph, ws, scratch, uturn_cost_m, table, from_edge, to_edge, bo
         k = apart[m]
         r = out[11][m]
         rec[k], dist[k], time[k], turns[k] = r, out[12][m], out[13][m], out[14][m]
-        if r >= 0:
-            p = pred[r]
-            arrival[k] = from_edge[k] if p < 0 else state_edge[state[p]]
+        arrival[k] = _search_arrival(r, from_edge[k], searched, state_edge)
     t_rec, t_dist, t_time, t_turns_out, t_arrival = table_routes(
         columns, state_edge, from_edge[on_table], to_edge[on_table], bounds[on_table],
         uturn_cost_m, scratch[0],
