@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 
 from api.errors import OverBudgetError
-from mapmatch.hmm.candidates import edges_searched
+from mapmatch.hmm.candidates import edges_searched, radius_of_sigma
 
 if TYPE_CHECKING:
     from mapmatch import MatchConfig, Trace
@@ -148,12 +148,10 @@ def match_cost(trace: Trace, config: MatchConfig, density: CandidateDensity) -> 
     (2, 4, 2.0)
     """
     n = len(trace)
-    radius = config.search_radius_m
     sigma = config.sigma_m
     if trace.accuracy_m is not None and np.isfinite(trace.accuracy_m).any():
-        worst = float(np.nanmax(trace.accuracy_m))
-        radius = max(radius, min(config.max_search_radius_m, config.radius_accuracy_factor * worst))
-        sigma = max(sigma, worst)
+        sigma = max(sigma, float(np.nanmax(trace.accuracy_m)))
+    radius = radius_of_sigma(sigma, config)
     margin_m = sigma * math.sqrt(1.0 + 2.0 * config.candidate_margin)
     reach = min(radius, margin_m) if config.candidate_margin > 0 else radius
     mean, most = density.at(reach)

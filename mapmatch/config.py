@@ -117,8 +117,9 @@ class MatchConfig:
     # --- candidates
     search_radius_m: float = _param(
         50.0,
-        doc="roads farther from a fix are not considered; a fix with a poor accuracy widens "
-        "its own radius to radius_accuracy_factor x accuracy",
+        doc="roads farther from a fix are not considered; a fix whose position sigma (its "
+        "accuracy, else sigma_m) asks for more widens its own radius to radius_accuracy_factor "
+        "x sigma",
         unit="m",
         gt=0,
         le=200,
@@ -128,7 +129,12 @@ class MatchConfig:
         200.0, doc="widest radius a poor accuracy may ask for", unit="m", gt=0, le=5000
     )
     radius_accuracy_factor: float = _param(
-        4.0, doc="radius of a fix with a poor accuracy, in accuracies", gt=0, le=100
+        4.0,
+        doc="a fix's search radius in its position sigmas, where wider than search_radius_m: "
+        "a sigma_m of 20 m searches 80 m (50 m, 2.5 sigmas, left 1 % of such fixes and many "
+        "of the outliers without their road)",
+        gt=0,
+        le=100,
     )
     max_candidates: int = _param(
         12,

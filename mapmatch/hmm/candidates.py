@@ -22,6 +22,7 @@ __all__ = [
     "Candidates",
     "edges_searched",
     "find_candidates",
+    "radius_of_sigma",
     "search_radii",
     "sigma_radius_kernel",
 ]
@@ -129,27 +130,49 @@ class Candidates:
 
 @njit(cache=True, nogil=True)
 def sigma_radius_kernel(n, accuracy, sigma_m, radius_m, factor, max_radius):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """Each fix's sigma and search radius (``accuracy`` empty: none reported)."""
-    big = np.finfo(np.float64).max
+    """
+    Each fix's sigma and search radius (``accuracy`` empty: none reported).
+
+    A fix's sigma is its accuracy where that is larger than ``sigma_m`` (NaN: not known), and
+    its radius ``factor`` sigmas, at least ``radius_m`` and at most ``max_radius``.
+    """
     sigma = np.full(n, sigma_m)
-    radius = np.full(n, radius_m)
     for i in range(len(accuracy)):
-        a = accuracy[i]
-        sigma[i] = np.fmax(sigma_m, a)
-        wide = (0.0 if np.isnan(a) else (big if a == np.inf else a)) * factor  # nan_to_num
-        radius[i] = min(max(radius_m, wide), max_radius)
+        sigma[i] = np.fmax(sigma_m, accuracy[i])
+    radius = np.empty(n)
+    for i in range(n):
+        radius[i] = min(max(radius_m, factor * sigma[i]), max_radius)
     return sigma, radius
+
+
+def radius_of_sigma(sigma_m: float, config: MatchConfig) -> float:
+    """
+    The search radius of a fix whose position sigma is ``sigma_m`` (as :func:`search_radii`).
+
+    Examples
+    --------
+    >>> from mapmatch.config import MatchConfig
+    >>> [radius_of_sigma(s, MatchConfig()) for s in (5.0, 20.0, 80.0)]
+    [50.0, 80.0, 200.0]
+    """
+    wide = config.radius_accuracy_factor * sigma_m
+    return float(min(max(config.search_radius_m, wide), config.max_search_radius_m))
 
 
 def search_radii(accuracy_m: FloatArray | None, n: int, config: MatchConfig) -> FloatArray:
     """
-    Search radius of each fix: the configured one, widened for fixes with a poor accuracy.
+    Search radius of each fix: the configured one, widened where its sigma asks for more.
+
+    ``radius_accuracy_factor`` times the fix's sigma (its accuracy where larger than
+    ``sigma_m``), at least ``search_radius_m``, at most ``max_search_radius_m``.
 
     Examples
     --------
     >>> from mapmatch.config import MatchConfig
     >>> search_radii(np.array([3.0, 20.0, np.nan, 500.0]), 4, MatchConfig())
     array([ 50.,  80.,  50., 200.])
+    >>> search_radii(np.array([3.0, 20.0, np.nan, 500.0]), 4, MatchConfig(sigma_m=20.0))
+    array([ 80.,  80.,  80., 200.])
     """
     accuracy = np.empty(0) if accuracy_m is None else np.ascontiguousarray(accuracy_m, np.float64)
     _, radius = sigma_radius_kernel(

@@ -17,7 +17,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from mapmatch.hmm.candidates import Candidates, find_candidates, sigma_radius_kernel
+from mapmatch.hmm.candidates import (
+    Candidates,
+    find_candidates,
+    radius_of_sigma,
+    sigma_radius_kernel,
+)
 from mapmatch.hmm.observations import Observations, Travel, merge_fixes, sigma_of_distances
 
 if TYPE_CHECKING:
@@ -291,11 +296,10 @@ def _nearest_sigma_kernel(c_ptr, c_dist, first, stop):  # type: ignore[no-untype
 
 def with_sigma(fixes: Fixes, sigma_m: float, config: MatchConfig) -> Fixes:
     """The fixes with a larger position sigma and the search radius that goes with it."""
-    wide = min(config.radius_accuracy_factor * sigma_m, config.max_search_radius_m)
     return dataclasses.replace(
         fixes,
         sigma_m=np.fmax(fixes.sigma_m, sigma_m),
-        radius_m=np.fmax(fixes.radius_m, wide),
+        radius_m=np.fmax(fixes.radius_m, radius_of_sigma(sigma_m, config)),
         sigma_max_m=float(np.fmax(fixes.sigma_max_m, sigma_m)),
     )
 

@@ -166,3 +166,25 @@ def test_config_overrides_are_limited_to_the_documented_fields() -> None:
         MatchConfig().replace({"route_slack_m": 5.0})
     with pytest.raises(ConfigError, match="sigma_m must be > 0"):
         MatchConfig().replace({"sigma_m": -1})
+
+
+@pytest.mark.parametrize(
+    ("sigma_m", "accuracy", "radius"),
+    [
+        (5.0, None, [50.0, 50.0, 50.0]),  # four sigmas inside the search radius: the radius
+        (20.0, None, [80.0, 80.0, 80.0]),  # a configured sigma widens every fix's radius
+        (5.0, [3.0, 30.0, np.nan], [50.0, 120.0, 50.0]),  # a poor accuracy widens its own
+        (20.0, [3.0, 30.0, 90.0], [80.0, 120.0, 200.0]),  # the larger sigma, at most 200 m
+    ],
+)
+def test_a_fix_searches_four_of_its_sigmas(
+    sigma_m: float, accuracy: list[float] | None, radius: list[float]
+) -> None:
+    from mapmatch.hmm.fixes import fixes_of
+    from mapmatch.trace import Trace
+
+    lon, lat = [7.42, 7.421, 7.422], [43.73, 43.73, 43.73]
+    trace = Trace(time=[0.0, 30.0, 60.0], lon=lon, lat=lat, accuracy=accuracy)
+    x, y = np.array([0.0, 80.0, 160.0]), np.zeros(3)
+    fixes = fixes_of(trace, x, y, MatchConfig(sigma_m=sigma_m))
+    assert fixes.radius_m.tolist() == radius
