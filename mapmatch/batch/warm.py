@@ -12,6 +12,7 @@ load them themselves).
 from __future__ import annotations
 
 import contextlib
+import itertools
 import logging
 import pickle
 import time
@@ -60,18 +61,21 @@ def warm_up() -> float:
             # a result sent back by a worker process carries its segments' attributes and
             # lines, not the network: its GeoJSON columns come from a kernel of their own
             geojson_bytes(pickle.loads(pickle.dumps(result)))
-            # every column given: the travel terms (speed, odometer) and per-fix accuracy
-            # compile kernel variants of their own
-            full = Trace(
-                time=[0, 5, 10, 15, 20],
-                lon=lon,
-                lat=lat,
-                heading=[90, 90, 90, 0, 0],
-                speed=[4.0, 4.0, 4.0, 4.0, 4.0],
-                accuracy=[4.0, 4.0, 4.0, 4.0, 4.0],
-                odometer=[0.0, 40.0, 80.0, 110.0, 150.0],
-            )
-            geojson_bytes(match(full, net))
+            # every set of optional columns, and no times: numba compiles a variant of some
+            # kernels for each (the travel terms, per-fix accuracy, a file with no time
+            # column), the assembly's taking a minute on a slow machine
+            columns = {
+                "heading": [90, 90, 90, 0, 0],
+                "speed": [4.0, 4.0, 4.0, 4.0, 4.0],
+                "accuracy": [4.0, 4.0, 4.0, 4.0, 4.0],
+                "odometer": [0.0, 40.0, 80.0, 110.0, 150.0],
+            }
+            for given in itertools.product((False, True), repeat=len(columns)):
+                chosen = {k: v for (k, v), on in zip(columns.items(), given, strict=True) if on}
+                geojson_bytes(
+                    match(Trace(time=[0, 5, 10, 15, 20], lon=lon, lat=lat, **chosen), net)
+                )
+            geojson_bytes(match(Trace(lon=lon, lat=lat), net))
             return time.perf_counter() - started
         return 0.0
     finally:
