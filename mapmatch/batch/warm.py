@@ -64,17 +64,24 @@ def warm_up() -> float:
             # every set of optional columns, and no times: numba compiles a variant of some
             # kernels for each (the travel terms, per-fix accuracy, a file with no time
             # column), the assembly's taking a minute on a slow machine
-            columns = {
-                "heading": [90, 90, 90, 0, 0],
+            columns: dict[str, list[float]] = {
+                "heading": [90.0, 90.0, 90.0, 0.0, 0.0],
                 "speed": [4.0, 4.0, 4.0, 4.0, 4.0],
                 "accuracy": [4.0, 4.0, 4.0, 4.0, 4.0],
                 "odometer": [0.0, 40.0, 80.0, 110.0, 150.0],
             }
             for given in itertools.product((False, True), repeat=len(columns)):
                 chosen = {k: v for (k, v), on in zip(columns.items(), given, strict=True) if on}
-                geojson_bytes(
-                    match(Trace(time=[0, 5, 10, 15, 20], lon=lon, lat=lat, **chosen), net)
+                given_trace = Trace(
+                    time=[0, 5, 10, 15, 20],
+                    lon=lon,
+                    lat=lat,
+                    heading=chosen.get("heading"),
+                    speed=chosen.get("speed"),
+                    accuracy=chosen.get("accuracy"),
+                    odometer=chosen.get("odometer"),
                 )
+                geojson_bytes(match(given_trace, net))
             geojson_bytes(match(Trace(lon=lon, lat=lat), net))
             return time.perf_counter() - started
         return 0.0
