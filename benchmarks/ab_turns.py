@@ -117,7 +117,7 @@ def parse_set(text: str, scratch: Path, sets_dir: Path = SETS) -> TraceSet:
         return TraceSet(text, str(path), extract, None)
     if len(parts) == 3:
         stem, label, kind = parts
-        path = sets_dir / stem / label / f"{kind}.csv"
+        path = (sets_dir / stem / label / f"{kind}.csv").resolve()  # the workers run elsewhere
         if not path.is_file():
             msg = f"no trace file {path} (benchmarks/compare_peers.py writes the peer sets)"
             raise SystemExit(msg)

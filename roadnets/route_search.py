@@ -36,6 +36,7 @@ __all__ = [
     "new_group_scratch",
     "new_workspace",
     "route_pairs_kernel",
+    "search_bounds",
     "search_many",
     "table_records",
     "table_routes",
@@ -432,6 +433,23 @@ def _largest_bounds(from_edge, bounds, slot):  # type: ignore[no-untyped-def]  #
 def _clear_slots(from_edge, slot):  # type: ignore[no-untyped-def]  # pragma: no cover
     for i in range(len(from_edge)):
         slot[from_edge[i]] = -1
+
+
+@njit(cache=True, nogil=True)
+def search_bounds(from_edge, bounds, slot):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """
+    The bound of the search each ``(from, to)`` pair's route comes from.
+
+    A search runs per distinct ``from`` edge with the largest bound of its pairs
+    (:func:`group_pairs`): routing some of the pairs, each with this bound, answers them as
+    routing all of them does. ``slot`` as in :func:`table_routes` (-1 throughout, left so).
+    """
+    largest = _largest_bounds(from_edge, bounds, slot)
+    out = np.empty(len(from_edge))
+    for i in range(len(from_edge)):
+        out[i] = largest[slot[from_edge[i]]]
+    _clear_slots(from_edge, slot)
+    return out
 
 
 @njit(cache=True, nogil=True)

@@ -17,6 +17,7 @@ from numba import njit
 
 from mapmatch.hmm.emission import flat_arrays
 from mapmatch.hmm.params import P_ROUTE_FACTOR, P_ROUTE_REACH, P_ROUTE_SLACK, model_params
+from roadnets.route_search import search_bounds
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -250,7 +251,8 @@ def standstill_distances(
     Within ``tolerance_m`` of ``a`` such a move is a slow or stopped car's fix scattering
     backwards: the car holds its position instead of driving round a block or a roundabout
     to explain it. ``inf`` where ``b`` is not that close behind. Only pairs whose two places
-    are that close in the plane are routed.
+    are that close in the plane, and whose way along their own edges is, are routed
+    (:func:`held_behind`).
 
     Examples
     --------
@@ -263,20 +265,26 @@ def standstill_distances(
     oa, ob = cands.offset_m[pairs.a], cands.offset_m[pairs.b]
     tol = np.ascontiguousarray(tolerance_m, dtype=np.float64)
     ax, ay, bx, by = cands.x[pairs.a], cands.y[pairs.a], cands.x[pairs.b], cands.y[pairs.b]
-    back, near = held_behind(ea, eb, oa, ob, ax, ay, bx, by, tol)
+    slot = np.full(len(arrays.edge_length_m), -1, dtype=np.int64)
+    back, near, reach = held_behind(ea, eb, oa, ob, ax, ay, bx, by, tol, arrays.edge_length_m, slot)
     if len(near):
-        routes = net.edge_routes(eb[near], ea[near], tol[near])
+        routes = net.edge_routes(eb[near], ea[near], reach)
         held_across(back, near, ea, eb, oa, ob, arrays.edge_length_m, routes.distance_m, tol)
     return np.asarray(back, dtype=np.float64)
 
 
 @njit(cache=True, nogil=True)
-def held_behind(ea, eb, oa, ob, ax, ay, bx, by, tolerance):  # type: ignore[no-untyped-def]  # pragma: no cover
+def held_behind(ea, eb, oa, ob, ax, ay, bx, by, tolerance, edge_len, slot):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
     How far ``b`` lies behind ``a`` on one edge, and the pairs to route from ``b`` to ``a``.
 
     ``back`` is the distance where ``b`` is behind ``a`` on their edge within the tolerance,
-    ``inf`` elsewhere; ``near`` the pairs on different edges close enough in the plane.
+    ``inf`` elsewhere; ``near`` the pairs on different edges close enough in the plane whose
+    way along the road (the rest of ``b``'s edge and ``a``'s offset, before any route between
+    the edges) fits in the tolerance too, and ``reach`` the bound to route each with: that of
+    the search from its ``b`` edge over every pair close in the plane
+    (:func:`~roadnets.route_search.search_bounds`), so the routes are those routing every
+    such pair gives. ``slot`` as there.
     """
     n = len(ea)
     back = np.full(n, np.inf)
@@ -291,7 +299,16 @@ def held_behind(ea, eb, oa, ob, ax, ay, bx, by, tolerance):  # type: ignore[no-u
         if dx * dx + dy * dy <= tolerance[k] * tolerance[k]:  # every pair: no libm hypot
             near[m] = k
             m += 1
-    return back, near[:m]
+    near = near[:m]
+    reach = search_bounds(eb[near], tolerance[near], slot)
+    kept = 0
+    for i in range(m):
+        k = near[i]
+        if (edge_len[eb[k]] - ob[k]) + oa[k] <= tolerance[k]:  # no route makes it shorter
+            near[kept] = k
+            reach[kept] = reach[i]
+            kept += 1
+    return back, near[:kept], reach[:kept]
 
 
 @njit(cache=True, nogil=True)

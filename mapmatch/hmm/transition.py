@@ -515,10 +515,12 @@ def transitions_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - co
     arrival = move_arrival.copy()
     move_kind = kind.copy()
     # holding still: b a little behind a, on its edge or across edges
-    back, near = held_behind(ea, eb, oa, ob, c_x[a], c_y[a], c_x[b], c_y[b], tolerance)
+    back, near, reach = held_behind(
+        ea, eb, oa, ob, c_x[a], c_y[a], c_x[b], c_y[b], tolerance, edge_len, scratch[0]
+    )
     if len(near):
         _, _, _, dist_back, _, _, _ = _pair_routes(
-            graph, ws, scratch, uturn_cost_m, table, eb[near], ea[near], tolerance[near]
+            graph, ws, scratch, uturn_cost_m, table, eb[near], ea[near], reach
         )
         held_across(back, near, ea, eb, oa, ob, edge_len, dist_back, tolerance)
     for k in range(n):

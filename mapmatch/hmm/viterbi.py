@@ -81,6 +81,18 @@ def _backtrack(delta, back):  # type: ignore[no-untyped-def]  # pragma: no cover
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _sizes(em):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """Each fix's candidates: the padding (``-inf`` emissions) comes after them."""
+    n_steps, width = em.shape
+    size = np.zeros(n_steps, dtype=np.int64)
+    for t in range(n_steps):
+        for k in range(width):
+            if em[t, k] > -np.inf:
+                size[t] = k + 1
+    return size
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _refused(code, before, edge):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     """Whether a transition (its ``pair`` code) holds across edges onto one not arrived by."""
     return code < -1 and before != ARRIVAL_UNKNOWN and before != edge
@@ -116,16 +128,17 @@ def viterbi_arrivals_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover
     back = np.full((n_steps, width), -1, dtype=np.int64)
     arrival = np.full((n_steps, width), ARRIVAL_UNKNOWN, dtype=np.int64)
     moved = np.zeros((n_steps, width), dtype=np.bool_)
+    size = _sizes(em)  # a padded state is never chosen, nor a way on from it: left out
     for k in range(width):
         delta[0, k] = em[0, k]
     for t in range(1, n_steps):
         alive = False
-        for k in range(width):
+        for k in range(size[t]):
             if em[t, k] == -np.inf:
                 continue
             best = -np.inf
             arg = -1
-            for j in range(width):  # plain Viterbi first: a refused hold only lowers a score
+            for j in range(size[t - 1]):  # plain Viterbi first: a refused hold only lowers a score
                 value = delta[t - 1, j] + tr[t - 1, j, k]
                 if value > best:
                     best = value
@@ -134,7 +147,7 @@ def viterbi_arrivals_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover
             if arg >= 0 and _refused(pair[t - 1, arg, k], arrival[t - 1, arg], cand_edge[t, k]):
                 best = -np.inf
                 arg = -1
-                for j in range(width):
+                for j in range(size[t - 1]):
                     q = pair[t - 1, j, k]
                     if q == -1:
                         continue
@@ -185,20 +198,14 @@ def _posterior_kernel(em, tr, starts, stops):  # type: ignore[no-untyped-def]  #
     alpha = np.full((n_steps, width), -np.inf)
     beta = np.full((n_steps, width), -np.inf)
     work = np.empty(width)
-    # candidates of each fix: the padding (-inf emissions) comes after them
-    size = np.zeros(n_steps, dtype=np.int64)
-    for t in range(n_steps):
-        for k in range(width):
-            if em[t, k] > -np.inf:
-                size[t] = k + 1
+    size = _sizes(em)  # padded states keep alpha and beta -inf and posterior 0
     for p in range(len(starts)):
         s, e = starts[p], stops[p]
         for k in range(width):
             alpha[s, k] = em[s, k]
         for t in range(s + 1, e):
-            for k in range(width):
+            for k in range(size[t]):
                 if em[t, k] == -np.inf:
-                    alpha[t, k] = -np.inf
                     continue
                 for j in range(size[t - 1]):
                     work[j] = alpha[t - 1, j] + tr[t - 1, j, k]
@@ -206,7 +213,7 @@ def _posterior_kernel(em, tr, starts, stops):  # type: ignore[no-untyped-def]  #
         for k in range(width):
             beta[e - 1, k] = 0.0
         for t in range(e - 2, s - 1, -1):
-            for j in range(width):
+            for j in range(size[t]):
                 for k in range(size[t + 1]):
                     work[k] = tr[t, j, k] + em[t + 1, k] + beta[t + 1, k]
                 beta[t, j] = _logsumexp(work, size[t + 1])

@@ -188,3 +188,43 @@ def test_a_fix_searches_four_of_its_sigmas(
     x, y = np.array([0.0, 80.0, 160.0]), np.zeros(3)
     fixes = fixes_of(trace, x, y, MatchConfig(sigma_m=sigma_m))
     assert fixes.radius_m.tolist() == radius
+
+
+def test_holds_across_edges_route_only_the_pairs_the_road_could_hold(default_net) -> None:  # type: ignore[no-untyped-def]
+    # a pair whose rest of b's edge and a's offset already exceed the tolerance is not routed;
+    # the rest are routed with the bound routing every pair near in the plane gives their b
+    # edge, so the distances behind are those of routing them all
+    from mapmatch.hmm.routes import held_across, held_behind
+
+    arrays = default_net.arrays
+    rng = np.random.default_rng(7)
+    eb = np.repeat(rng.integers(0, arrays.n_edges, 150), 3)  # each b edge in three steps
+    nexts = [arrays.out_edge[arrays.out_ptr[v] : arrays.out_ptr[v + 1]] for v in arrays.edge_v[eb]]
+    keep = np.array([len(n) > 0 for n in nexts])
+    eb = eb[keep]
+    ea = np.array([rng.choice(n) for n, k in zip(nexts, keep, strict=True) if k], dtype=np.int64)
+    twin = arrays.edge_twin[eb]
+    turn = (np.arange(len(ea)) % 5 == 1) & (twin >= 0)
+    ea[turn] = twin[turn]  # some a U-turn at b's end away (a key of 50 m beyond their length)
+    ea[::7] = eb[::7]  # some on one edge
+    edge_len = arrays.edge_length_m
+    ob = rng.uniform(0, 1, len(eb)) * edge_len[eb]
+    oa = rng.uniform(0, 1, len(ea)) * edge_len[ea]
+    tol = rng.choice([10.0, 20.0, 40.0, 80.0], len(ea))  # steps of different sigmas
+    xy = np.zeros(len(ea))  # every pair near in the plane
+    slot = np.full(arrays.n_edges, -1, dtype=np.int64)
+    back, near, reach = held_behind(ea, eb, oa, ob, xy, xy, xy, xy, tol, edge_len, slot)
+    routes = default_net.edge_routes(eb[near], ea[near], reach)
+    held_across(back, near, ea, eb, oa, ob, edge_len, routes.distance_m, tol)
+    # every pair on two edges routed, each with its own tolerance as the bound of its group
+    apart = np.flatnonzero(ea != eb)
+    assert 0 < len(near) < len(apart)
+    every = default_net.edge_routes(eb[apart], ea[apart], tol[apart])
+    expected = np.full(len(ea), np.inf)
+    same = (ea == eb) & (ob <= oa) & (oa - ob <= tol)
+    expected[same] = (oa - ob)[same]
+    d = (edge_len[eb[apart]] - ob[apart]) + every.distance_m + oa[apart]
+    expected[apart] = np.where(d <= tol[apart], d, np.inf)
+    assert np.isfinite(expected).sum() > 10
+    assert np.array_equal(back, expected)
+    assert (slot == -1).all()

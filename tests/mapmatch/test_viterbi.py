@@ -50,6 +50,18 @@ def brute_force_max_log_lik(trellis: Trellis) -> float:
     return max(ll for _, ll in all_sequences(trellis))
 
 
+def brute_force_marginals(trellis: Trellis) -> np.ndarray:
+    steps, width = trellis.log_emission.shape
+    seqs = all_sequences(trellis)
+    lls = np.array([ll for _, ll in seqs])
+    weights = np.exp(lls - lls.max())
+    weights /= weights.sum()
+    out = np.zeros((steps, width))
+    for (states, _), w in zip(seqs, weights, strict=True):
+        out[np.arange(steps), states] += w
+    return out
+
+
 @settings(max_examples=200)
 @given(trellis=small_trellises(max_steps=5, max_states=4))
 def test_viterbi_finds_the_most_likely_sequence(trellis: Trellis) -> None:
@@ -62,17 +74,41 @@ def test_viterbi_finds_the_most_likely_sequence(trellis: Trellis) -> None:
 @settings(max_examples=100)
 @given(trellis=small_trellises(max_steps=4, max_states=3))
 def test_posteriors_are_the_brute_force_marginals(trellis: Trellis) -> None:
-    steps, width = trellis.log_emission.shape
+    steps = len(trellis.log_emission)
     post = posteriors(trellis.log_emission, trellis.log_transition, [(0, steps)])
-    seqs = all_sequences(trellis)
-    lls = np.array([ll for _, ll in seqs])
-    weights = np.exp(lls - lls.max())
-    weights /= weights.sum()
-    expected = np.zeros((steps, width))
-    for (states, _), w in zip(seqs, weights, strict=True):
-        expected[np.arange(steps), states] += w
+    expected = brute_force_marginals(trellis)
     assert np.allclose(post, expected, atol=1e-9)
     assert np.allclose(post.sum(axis=1), 1.0)
+
+
+@st.composite
+def padded_trellises(draw: st.DrawFn) -> Trellis:
+    """A trellis whose fixes have 1-3 candidates each, padded to the widest (as the matcher's)."""
+    trellis = draw(small_trellises(max_steps=4, max_states=3))
+    em, tr = trellis.log_emission.copy(), trellis.log_transition.copy()
+    steps, width = em.shape
+    sizes = draw(st.lists(st.integers(1, width), min_size=steps, max_size=steps))
+    for t, size in enumerate(sizes):
+        em[t, size:] = -np.inf
+        if t + 1 < steps:  # no way on from a padded state, nor onto one
+            tr[t, size:, :] = -np.inf
+            tr[t, :, sizes[t + 1] :] = -np.inf
+    return Trellis(em, tr)
+
+
+@settings(max_examples=150)
+@given(trellis=padded_trellises())
+def test_a_padded_trellis_is_solved_over_its_candidates_alone(trellis: Trellis) -> None:
+    # the passes skip each fix's padding: the same best sequence and marginals as over all
+    steps = len(trellis.log_emission)
+    best = viterbi(trellis.log_emission, trellis.log_transition)
+    assert best.pieces == [(0, steps)]
+    assert np.isfinite(trellis.log_emission[np.arange(steps), best.states]).all()
+    assert best.log_likelihood == pytest.approx(brute_force_max_log_lik(trellis))
+    post = posteriors(trellis.log_emission, trellis.log_transition, [(0, steps)])
+    expected = brute_force_marginals(trellis)
+    assert np.allclose(post, expected, atol=1e-9)
+    assert (post[~np.isfinite(trellis.log_emission)] == 0).all()
 
 
 def test_no_possible_transition_splits_the_sequence() -> None:
