@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/ab_turns.py --variant base=/tmp/old-tree --variant new=. \
         [--variant novec=.:NUMBA_LOOP_VECTORIZE=0,NUMBA_CACHE_DIR=/tmp/nc-novec] \
         [--set krems_at_2013:15s_10m:positions ...] [--set sim:15:25:20] \
-        [--rounds 100] [--passes 3] [--sets-dir .bench/peers/sets]
+        [--rounds 100] [--passes 3] [--evict-mb 0] [--sets-dir .bench/peers/sets]
 
 A change that saves a few per cent of a trace is smaller than the shared machine's swings
 between minutes (a sixth, more in a slow spell), so it is measured in turns: one process per
@@ -16,7 +16,9 @@ variant's median over the rounds, and against the first variant the median of th
 paired ratios with their quartiles (below 1: faster), and whether its documents are the
 first variant's (their stats' timings left out: a change meant to be faster only should
 print ``equal``). The baseline's tree once more under another name shows the sitting's noise
-(its ratio should come out within a per cent of 1).
+(its ratio should come out within a per cent of 1). ``--evict-mb 64`` reads that much other
+memory before every pass, so that each pass starts cold, as in the peer comparison, where
+the other peers' passes run between two of ours.
 
 A set is a trace file of the peer comparison, ``EXTRACT:SET:INPUT``: ``krems_at_2013:15s_10m:
 positions`` is ``krems_at_2013/15s_10m/positions.csv`` in ``--sets-dir`` (a folder a
@@ -163,8 +165,16 @@ def _write_simulated(
 # --------------------------------------------------------------------------- the worker
 
 
-def worker(sets: list[dict[str, Any]], passes: int) -> None:
-    """Load the sets, say where ``mapmatch`` came from, then time a round on each ``go``."""
+def worker(sets: list[dict[str, Any]], passes: int, evict_mb: int = 0) -> None:
+    """
+    Load the sets, say where ``mapmatch`` came from, then time a round on each ``go``.
+
+    ``evict_mb``: before each pass, that many MB of other memory are read (untimed), so the
+    pass starts with the caches holding none of the match's code or data, as a pass of the
+    peer comparison does after the other peers' passes.
+    """
+    import numpy as np
+
     import mapmatch
     import roadnets
     from mapmatch.export import geojson_bytes
@@ -182,11 +192,13 @@ def worker(sets: list[dict[str, Any]], passes: int) -> None:
         digests.append(digest.hexdigest()[:16])
         jobs.append((net, traces, config))
     print(json.dumps({READY: str(Path(mapmatch.__file__).parent), "digests": digests}), flush=True)
+    other = np.ones(evict_mb * 2**20 // 8)
     for _ in sys.stdin:
         times = []
         for net, traces, config in jobs:
             best = float("inf")
             for _ in range(passes):
+                other.sum()
                 start = time.process_time()
                 for trace in traces:
                     geojson_bytes(mapmatch.match(trace, net, config))
@@ -212,7 +224,9 @@ def _without_timings(document: bytes) -> bytes:
 class Worker:
     """A variant's process, loaded and warm: asked for a round, it answers its times."""
 
-    def __init__(self, variant: Variant, sets: list[TraceSet], passes: int) -> None:
+    def __init__(
+        self, variant: Variant, sets: list[TraceSet], passes: int, evict_mb: int = 0
+    ) -> None:
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(
             [str(variant.tree), *filter(None, [env.get("PYTHONPATH")])]
@@ -222,7 +236,10 @@ class Worker:
             [{"csv": s.csv, "extract": s.extract, "sigma_m": s.sigma_m} for s in sets]
         )
         self.process = subprocess.Popen(
-            [sys.executable, __file__, "--worker", spec, "--passes", str(passes)],
+            [
+                *(sys.executable, __file__, "--worker", spec),
+                *("--passes", str(passes), "--evict-mb", str(evict_mb)),
+            ],
             cwd=tempfile.gettempdir(),  # not a tree: only PYTHONPATH says which mapmatch
             env=env,
             stdin=subprocess.PIPE,
@@ -268,13 +285,13 @@ class Worker:
 
 
 def run_turns(
-    variants: list[Variant], sets: list[TraceSet], rounds: int, passes: int
+    variants: list[Variant], sets: list[TraceSet], rounds: int, passes: int, evict_mb: int = 0
 ) -> tuple[dict[str, list[list[float]]], dict[str, list[str]]]:
     """Each variant's us a trace per round and set, and its documents' digests per set."""
     workers: dict[str, Worker] = {}
     try:
         for v in variants:
-            workers[v.name] = Worker(v, sets, passes)
+            workers[v.name] = Worker(v, sets, passes, evict_mb)
         times: dict[str, list[list[float]]] = {v.name: [] for v in variants}
         for r in range(rounds):
             for v in variants if r % 2 == 0 else variants[::-1]:
@@ -319,16 +336,19 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--set", action="append", default=[], help="EXTRACT:SET:INPUT or sim:...")
     p.add_argument("--rounds", type=int, default=100, help="rounds of turns (default 100)")
     p.add_argument("--passes", type=int, default=3, help="passes a round, the fastest kept")
+    p.add_argument(
+        "--evict-mb", type=int, default=0, help="MB of other memory read before each pass"
+    )
     p.add_argument("--sets-dir", type=Path, default=SETS, help="where the peer sets are")
     p.add_argument("--worker", help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     if a.worker is not None:
-        worker(json.loads(a.worker), a.passes)
+        worker(json.loads(a.worker), a.passes, a.evict_mb)
         return 0
     if len(a.variant) < 2:
         p.error("give at least two --variant")
-    if a.rounds < 1 or a.passes < 1:
-        p.error("--rounds and --passes must be at least 1")
+    if a.rounds < 1 or a.passes < 1 or a.evict_mb < 0:
+        p.error("--rounds and --passes must be at least 1, --evict-mb at least 0")
     variants = [parse_variant(v) for v in a.variant]
     if len({v.name for v in variants}) < len(variants):
         p.error("every --variant needs a name of its own")
@@ -336,9 +356,10 @@ def main(argv: list[str] | None = None) -> int:
         sets = [parse_set(s, Path(scratch), a.sets_dir) for s in a.set or ["sim:15:25:20"]]
         load = os.getloadavg()[0]
         began = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
-        times, digests = run_turns(variants, sets, a.rounds, a.passes)
+        times, digests = run_turns(variants, sets, a.rounds, a.passes, a.evict_mb)
+    evicted = f", {a.evict_mb} MB read before each" if a.evict_mb else ""
     print(
-        f"{began}, {a.rounds} rounds of {a.passes} passes, load average {load:.2f} at the "
+        f"{began}, {a.rounds} rounds of {a.passes} passes{evicted}, load average {load:.2f} at the "
         f"start and {os.getloadavg()[0]:.2f} at the end; CPU us a trace, match + GeoJSON\n"
     )
     print(report(variants, sets, times, digests))

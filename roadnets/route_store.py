@@ -76,17 +76,13 @@ THREAD_NAME = "route-table"
 ROUTES_FOLDER = "routes"
 
 #: Bumped whenever the stored arrays change meaning; other folders are then rebuilt.
-_FORMAT = 2
+_FORMAT = 3
 
 #: The arrays of a stored table's look-up index, :func:`~roadnets.record_index.record_index`.
 _INDEX_ARRAYS = ("index_ptr", "index_slots")
 
 #: Arrays of a stored table: its records, then its look-up index.
-_ARRAYS = ("ptr", "state", "distance_m", "time_s", "uturns", "pred", *_INDEX_ARRAYS)
-
-#: Bytes of one record: state (int32), length and time (float64), U-turns (int16),
-#: predecessor (int32) and its two index slots (uint16).
-_RECORD_BYTES = 4 + 8 + 8 + 2 + 4 + 2 * 2
+_ARRAYS = ("ptr", "rows", *_INDEX_ARRAYS)
 
 #: The note when the network holds a table of its caller's (:meth:`precompute_routes`).
 _GIVEN = "given (precompute_routes)"
@@ -108,13 +104,14 @@ def estimate_bytes(
     Searches ``sample`` edges spread evenly over the network (all of them when there are
     fewer) and scales their records up to every edge.
     """
-    from roadnets.routes import route_table
+    from roadnets.routes import RECORD_DTYPE, route_table
 
     n = arrays.n_edges
     sources = np.unique(np.linspace(0, n - 1, min(sample, n)).astype(np.int64))
     part = route_table(arrays, turns, sources, bound_m, uturn_cost_m=uturn_cost_m)
     per_source = len(part.state) / max(len(sources), 1)
-    return int(per_source * n * _RECORD_BYTES + 8 * (n + 1))
+    record_bytes = RECORD_DTYPE.itemsize + 2 * 2  # and its two index slots (uint16)
+    return int(per_source * n * record_bytes + 8 * (n + 1))
 
 
 def fitted_bound(
@@ -210,7 +207,7 @@ def read_table(
     U-turn cost, or for another network; a folder that is corrupt is removed (and so built
     again).
     """
-    from roadnets.routes import RouteTable
+    from roadnets.routes import RECORD_DTYPE, RouteTable
 
     folder = entry / ROUTES_FOLDER
     meta_path = folder / "meta.json"
@@ -237,6 +234,9 @@ def read_table(
         if n != turns.n_edges or len(loaded["ptr"]) != n + 1:
             msg = f"it holds {n:,} edges, the network {turns.n_edges:,}"
             raise ValueError(msg)
+        if loaded["rows"].dtype != RECORD_DTYPE:
+            msg = f"its records are {loaded['rows'].dtype}, not {RECORD_DTYPE}"
+            raise ValueError(msg)
     except (OSError, ValueError, KeyError, TypeError) as exc:
         _log.warning("stored route table %s is corrupt (%s); building it again", folder, exc)
         with contextlib.suppress(OSError):
@@ -249,11 +249,7 @@ def read_table(
         uturn_cost_m=float(meta["uturn_cost_m"]),
         weighted=False,
         ptr=loaded["ptr"],
-        state=loaded["state"],
-        distance_m=loaded["distance_m"],
-        time_s=loaded["time_s"],
-        uturns=loaded["uturns"],
-        pred=loaded["pred"],
+        rows=loaded["rows"],
         turns=turns,
     )
     table._index.extend(loaded[name] for name in _INDEX_ARRAYS)  # stored with it
@@ -407,7 +403,9 @@ def _provide(net: RoadNetwork, keeper: TableKeeper) -> str:
         return _attach(net, keeper, table, stored=False, how="built (no cache entry to keep it)")
     try:
         fitted_to = budget if bound < ROUTE_TABLE_BOUND_M else float("inf")
-        write_table(entry, table, fitted_to, replace=found is not None)
+        # one stored that could not serve (shorter, or of an older format) gives way
+        stale = found is not None or (entry / ROUTES_FOLDER / "meta.json").exists()
+        write_table(entry, table, fitted_to, replace=stale)
     except OSError as exc:
         how = f"built, not stored ({exc})"
         return _attach(net, keeper, table, stored=False, how=how)
