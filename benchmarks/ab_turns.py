@@ -237,8 +237,14 @@ class Worker:
         )
         self.process = subprocess.Popen(
             [
-                *(sys.executable, __file__, "--worker", spec),
-                *("--passes", str(passes), "--evict-mb", str(evict_mb)),
+                sys.executable,
+                __file__,
+                "--worker",
+                spec,
+                "--passes",
+                str(passes),
+                "--evict-mb",
+                str(evict_mb),
             ],
             cwd=tempfile.gettempdir(),  # not a tree: only PYTHONPATH says which mapmatch
             env=env,
