@@ -487,12 +487,10 @@ def table_routes(table, state_edge, from_edge, to_edge, bounds, uturn_cost, slot
     The pairs are memory-bound on the table (a trace's records are seldom in the caches: the
     rest of its match has run since the last trace's), so the look-up runs in stages, each
     asking for the next stage's loads of every pair before any is read (:func:`prefetch`):
-    the index slot a pair's record is looked for in first, then that record, then the record
-    before it on the route (its arrival edge). One pass reading each record's columns together
-    is 10-20 % faster than a pass per column; the stages take 13-21 % off that pass on a trace
-    read right after another (3-6 us a trace slower with warm caches). The columns are those
-    of a table's rows (:data:`~roadnets.routes.RECORD_DTYPE`), a record's side by side: one
-    load a record.
+    the index slot a pair's record is looked for in first, then that record's columns, then
+    the record before it on the route (its arrival edge). One pass reading each record's
+    columns together is 10-20 % faster than a pass per column; the stages take 13-21 % off
+    that pass on a trace read right after another (3-6 us a trace slower with warm caches).
 
     ``table`` is ``(sources, ptr, state, index, distance, time, uturns, pred, copy_ptr,
     copy_state)`` (``index`` the table's :func:`~roadnets.record_index.record_index`);
@@ -522,7 +520,12 @@ def table_routes(table, state_edge, from_edge, to_edge, bounds, uturn_cost, slot
         if rank[i] >= 0:
             place = np.int64(slots[first[i]])
             if place != 0:
-                prefetch(distance, ptr[rank[i]] + place - 1)  # the record's line, every column
+                r = ptr[rank[i]] + place - 1
+                prefetch(state, r)
+                prefetch(distance, r)
+                prefetch(uturns, r)
+                prefetch(time, r)
+                prefetch(pred, r)
     # stage 3: the records, their bound check and columns; the record before each on its route
     rec = np.full(n, -1, dtype=np.int64)
     dist_out = np.full(n, np.inf)

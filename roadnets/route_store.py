@@ -75,14 +75,20 @@ THREAD_NAME = "route-table"
 #: The table's folder inside a network's cache entry.
 ROUTES_FOLDER = "routes"
 
-#: Bumped whenever the stored arrays change meaning; other folders are then rebuilt.
-_FORMAT = 3
+#: Bumped whenever the stored arrays change meaning; other folders are then rebuilt (3 kept
+#: each record's columns side by side, one packed row: the kernels then read strided views,
+#: whose compiled variants differ from those of a table's own arrays; 4 is columns again).
+_FORMAT = 4
 
 #: The arrays of a stored table's look-up index, :func:`~roadnets.record_index.record_index`.
 _INDEX_ARRAYS = ("index_ptr", "index_slots")
 
 #: Arrays of a stored table: its records, then its look-up index.
-_ARRAYS = ("ptr", "rows", *_INDEX_ARRAYS)
+_ARRAYS = ("ptr", "state", "distance_m", "time_s", "uturns", "pred", *_INDEX_ARRAYS)
+
+#: Bytes of one record: state (int32), length and time (float64), U-turns (int16),
+#: predecessor (int32) and its two index slots (uint16).
+_RECORD_BYTES = 4 + 8 + 8 + 2 + 4 + 2 * 2
 
 #: The note when the network holds a table of its caller's (:meth:`precompute_routes`).
 _GIVEN = "given (precompute_routes)"
@@ -104,14 +110,13 @@ def estimate_bytes(
     Searches ``sample`` edges spread evenly over the network (all of them when there are
     fewer) and scales their records up to every edge.
     """
-    from roadnets.routes import RECORD_DTYPE, route_table
+    from roadnets.routes import route_table
 
     n = arrays.n_edges
     sources = np.unique(np.linspace(0, n - 1, min(sample, n)).astype(np.int64))
     part = route_table(arrays, turns, sources, bound_m, uturn_cost_m=uturn_cost_m)
     per_source = len(part.state) / max(len(sources), 1)
-    record_bytes = RECORD_DTYPE.itemsize + 2 * 2  # and its two index slots (uint16)
-    return int(per_source * n * record_bytes + 8 * (n + 1))
+    return int(per_source * n * _RECORD_BYTES + 8 * (n + 1))
 
 
 def fitted_bound(
@@ -207,7 +212,7 @@ def read_table(
     U-turn cost, or for another network; a folder that is corrupt is removed (and so built
     again).
     """
-    from roadnets.routes import RECORD_DTYPE, RouteTable
+    from roadnets.routes import RouteTable
 
     folder = entry / ROUTES_FOLDER
     meta_path = folder / "meta.json"
@@ -234,9 +239,6 @@ def read_table(
         if n != turns.n_edges or len(loaded["ptr"]) != n + 1:
             msg = f"it holds {n:,} edges, the network {turns.n_edges:,}"
             raise ValueError(msg)
-        if loaded["rows"].dtype != RECORD_DTYPE:
-            msg = f"its records are {loaded['rows'].dtype}, not {RECORD_DTYPE}"
-            raise ValueError(msg)
     except (OSError, ValueError, KeyError, TypeError) as exc:
         _log.warning("stored route table %s is corrupt (%s); building it again", folder, exc)
         with contextlib.suppress(OSError):
@@ -249,7 +251,11 @@ def read_table(
         uturn_cost_m=float(meta["uturn_cost_m"]),
         weighted=False,
         ptr=loaded["ptr"],
-        rows=loaded["rows"],
+        state=loaded["state"],
+        distance_m=loaded["distance_m"],
+        time_s=loaded["time_s"],
+        uturns=loaded["uturns"],
+        pred=loaded["pred"],
         turns=turns,
     )
     table._index.extend(loaded[name] for name in _INDEX_ARRAYS)  # stored with it

@@ -58,11 +58,9 @@ if TYPE_CHECKING:
 
 __all__ = [
     "DEFAULT_UTURN_COST_M",
-    "RECORD_DTYPE",
     "EdgeRoutes",
     "RouteTable",
     "edge_routes_of",
-    "record_rows",
     "route_pairs",
     "route_table",
     "scratch",
@@ -74,35 +72,6 @@ IntArray = npt.NDArray[np.int64]
 Int32Array = npt.NDArray[np.int32]
 Int16Array = npt.NDArray[np.int16]
 IndexArray = npt.NDArray[np.integer[Any]]
-
-#: A route table's record as it is kept: its columns side by side (26 bytes, packed). The
-#: look-up of a candidate pair reads all of a record's columns: one cache line (two where the
-#: record straddles a boundary, 2 in 5) instead of one a column (Krems 30 s, the pairs of a
-#: trace read right after 64 MB of other reads: 176 -> 154 us a trace; the same with 32-byte
-#: rows on 64-byte boundaries, which take a fifth more memory).
-RECORD_DTYPE = np.dtype(
-    [
-        ("distance_m", np.float64),
-        ("time_s", np.float64),
-        ("state", np.int32),
-        ("pred", np.int32),
-        ("uturns", np.int16),
-    ]
-)
-
-
-def record_rows(
-    state: IndexArray,
-    distance_m: FloatArray,
-    time_s: FloatArray,
-    uturns: IndexArray,
-    pred: IndexArray,
-) -> npt.NDArray[np.void]:
-    """Records' columns as :data:`RECORD_DTYPE` rows."""
-    rows = np.empty(len(state), dtype=RECORD_DTYPE)
-    rows["distance_m"], rows["time_s"], rows["uturns"] = distance_m, time_s, uturns
-    rows["state"], rows["pred"] = state, pred
-    return rows
 
 
 @dataclass(frozen=True, slots=True)
@@ -130,9 +99,10 @@ class RouteTable:
         instead of lengths.
     ptr
         Records of ``sources[i]`` are ``ptr[i]:ptr[i + 1]``, in the order they were settled.
-    rows
-        The records, :data:`RECORD_DTYPE` (:func:`record_rows`); their columns are
-        :attr:`state`, :attr:`distance_m`, :attr:`time_s`, :attr:`uturns` and :attr:`pred`.
+    state, distance_m, time_s, uturns, pred
+        Per record: the state reached, route length (m) and free-flow time (s) from the end
+        of the source to the start of the state's edge, U-turns on the route (the move onto
+        the state's edge included), the predecessor record or -1.
     turns
         The turn graph searched (maps states to edges).
     """
@@ -143,36 +113,15 @@ class RouteTable:
     uturn_cost_m: float
     weighted: bool
     ptr: IntArray
-    rows: npt.NDArray[np.void] = field(repr=False)
+    state: Int32Array
+    distance_m: FloatArray
+    time_s: FloatArray
+    uturns: Int16Array
+    pred: Int32Array
     turns: TurnGraph = field(repr=False)
     _index: list[npt.NDArray[np.integer[Any]]] = field(
         default_factory=list, init=False, repr=False, compare=False
     )
-
-    @property
-    def state(self) -> Int32Array:
-        """Per record: the state reached."""
-        return self.rows["state"]
-
-    @property
-    def distance_m(self) -> FloatArray:
-        """Per record: the route's length (m) from the end of the source to the state's edge."""
-        return self.rows["distance_m"]
-
-    @property
-    def time_s(self) -> FloatArray:
-        """Per record: the route's free-flow time (s)."""
-        return self.rows["time_s"]
-
-    @property
-    def uturns(self) -> Int16Array:
-        """Per record: U-turns on the route (the move onto the state's edge included)."""
-        return self.rows["uturns"]
-
-    @property
-    def pred(self) -> Int32Array:
-        """Per record: the record before it on its route, or -1."""
-        return self.rows["pred"]
 
     def lookup_columns(self) -> tuple[Any, ...]:
         """
@@ -240,8 +189,8 @@ class RouteTable:
     @property
     def nbytes(self) -> int:
         """Memory held by the table's arrays (not the turn graph)."""
-        arrays: list[npt.NDArray[Any]] = [self.sources, self.bounds_m, self.ptr, self.rows]
-        arrays += self._index
+        arrays: list[npt.NDArray[Any]] = [self.sources, self.bounds_m, self.ptr, self.state]
+        arrays += [self.distance_m, self.time_s, self.uturns, self.pred, *self._index]
         return sum(a.nbytes for a in arrays)
 
     def index(self) -> tuple[IndexArray, IndexArray]:
@@ -441,7 +390,11 @@ def _table(
         uturn_cost_m=float(cost[0]),
         weighted=cost[1] is not None or cost[2] is not None,
         ptr=ptr,
-        rows=record_rows(state, dist, time, uturns, pred),
+        state=state,
+        distance_m=dist,
+        time_s=time,
+        uturns=uturns,
+        pred=pred.astype(np.int32),
         turns=turns,
     )
 

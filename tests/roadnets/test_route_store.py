@@ -97,14 +97,14 @@ def test_a_corrupt_stored_table_is_removed_and_built_again(
     assert net.cache_entry is not None
     a, b = _pairs(net)
     expected = table.records(a, b)  # before the file under its mapping is overwritten
-    rows = Path(net.cache_entry) / ROUTES_FOLDER / "rows.npy"
-    raw = bytearray(rows.read_bytes())
+    state = Path(net.cache_entry) / ROUTES_FOLDER / "state.npy"
+    raw = bytearray(state.read_bytes())
     raw[-1] ^= 0xFF
-    rows.write_bytes(bytes(raw))
+    state.write_bytes(bytes(raw))
     again = roadnets.load(OAKLAND, cache_dir=tmp_path)
     with caplog.at_level(logging.WARNING, logger="roadnets"):
         rebuilt = again.sparse_route_table()
-    assert "checksum of rows.npy differs" in caplog.text
+    assert "checksum of state.npy differs" in caplog.text
     assert rebuilt is not None
     assert again.route_table_note.startswith("built and stored in the cache entry: ")
     assert np.array_equal(rebuilt.records(a, b), expected)
@@ -126,21 +126,6 @@ def test_a_table_stored_in_another_format_gives_way_to_a_new_one(tmp_path: Path)
     third = roadnets.load(OAKLAND, cache_dir=tmp_path)
     assert third.sparse_route_table() is not None
     assert third.route_table_note.startswith("read from the cache entry: ")
-
-
-def test_a_table_keeps_each_record_s_columns_side_by_side_built_or_read(tmp_path: Path) -> None:
-    # the look-up reads every column of a record: one row of 26 bytes, the columns its views
-    net = roadnets.load(OAKLAND, cache_dir=tmp_path)
-    built = net.sparse_route_table()
-    read = roadnets.load(OAKLAND, cache_dir=tmp_path).sparse_route_table()
-    assert built is not None
-    assert read is not None
-    for table in (built, read):
-        assert table.rows.dtype.itemsize == 26
-        assert table.distance_m.strides == (26,)
-        assert table.state.base is not None
-    for name in ("state", "distance_m", "time_s", "uturns", "pred"):
-        assert np.array_equal(getattr(built, name), getattr(read, name))
 
 
 def test_a_forked_child_looks_for_the_table_afresh() -> None:
