@@ -46,6 +46,8 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
+from mapmatch.readonly import read_only
+
 if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
 
@@ -828,7 +830,7 @@ def _text(texts: list[list[str]]) -> tuple[Any, IntArray, IntArray]:
     text_at = np.fromiter(accumulate(map(len, cells), initial=0), np.int64, len(cells) + 1)
     text_col = np.fromiter(accumulate(map(len, texts), initial=0), np.int64, len(texts) + 1)
     data = "".join(cells).encode("ascii")
-    return np.frombuffer(data, dtype=np.uint8), text_at, text_col  # read-only: see _read_only
+    return np.frombuffer(data, dtype=np.uint8), text_at, text_col  # read-only (frombuffer of bytes)
 
 
 class Packed(NamedTuple):
@@ -898,20 +900,6 @@ class _SourcePlanner(_Writer):
         raise ValueError(msg)
 
 
-def _read_only(text: ByteArray) -> ByteArray:
-    """
-    ``text`` as a read-only array (a view if it is writable).
-
-    Whether an array is writable is part of its compiled type: the writer is given read-only
-    text always (a network's names are), so that it is compiled once, not twice.
-    """
-    if not text.flags.writeable:
-        return text
-    view = text.view()
-    view.flags.writeable = False
-    return view
-
-
 #: The program of each sourced schema (:func:`sourced_pieces`), made on its first call.
 _SOURCED: dict[str, tuple[IntArray, Any, IntArray]] = {}
 _NO_INTS = np.zeros(1, dtype=np.int64)
@@ -952,7 +940,7 @@ def sourced_pieces(
     ops, lit, lit_at = program
     out, _, slow = _write_rows(
         1, -1, ops, lit, lit_at, packed.floats, packed.floats_at, packed.ints, packed.ints_at,
-        _read_only(packed.text), _NO_INTS, _NO_INTS, _POW10,
+        read_only(packed.text), _NO_INTS, _NO_INTS, _POW10,
     )  # fmt: skip
     text = memoryview(out)
     if not len(slow):

@@ -24,6 +24,7 @@ from mapmatch.hmm.candidates import (
     sigma_radius_kernel,
 )
 from mapmatch.hmm.observations import Observations, Travel, merge_fixes, sigma_of_distances
+from mapmatch.readonly import EMPTY_FLOAT, read_only
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -47,7 +48,7 @@ __all__ = [
 @dataclass(frozen=True, slots=True)
 class Fixes:
     """
-    A trace's fixes in metres with the per-fix model inputs.
+    A trace's fixes in metres with the per-fix model inputs, every array read-only.
 
     ``time_s`` is NaN throughout when the trace has no usable times; ``speed_mps`` the
     reported speed, else one estimated from positions and times (NaN when neither is known);
@@ -67,20 +68,27 @@ class Fixes:
 
 
 def fixes_of(trace: Trace, x: FloatArray, y: FloatArray, config: MatchConfig) -> Fixes:
-    """The model inputs of every fix: position sigma, search radius, speed and travel."""
+    """
+    The model inputs of every fix: position sigma, search radius, speed and travel.
+
+    Every array is read-only (:mod:`mapmatch.readonly`): a trace's columns are, and so the
+    arrays computed or standing in for a missing column are made, so that the kernels that
+    read them have one compiled variant whichever columns a trace has.
+    """
     n = len(x)
     f8 = np.float64
-    none = np.empty(0)
-    accuracy = none if trace.accuracy_m is None else np.ascontiguousarray(trace.accuracy_m, f8)
-    time_s = trace.time_s if trace.has_time else np.full(n, np.nan)
-    reported = trace.speed_mps
+    x, y = read_only(np.ascontiguousarray(x, f8)), read_only(np.ascontiguousarray(y, f8))
+    given = trace.accuracy_m
+    accuracy = EMPTY_FLOAT if given is None else read_only(np.ascontiguousarray(given, f8))
+    time_s = read_only(trace.time_s if trace.has_time else np.full(n, np.nan))
+    reported = None if trace.speed_mps is None else read_only(trace.speed_mps)
     travel_on = config.use_travel and (trace.odometer_m is not None or reported is not None)
     sigma, sigma_max, radius, speed, speed_m, slack_m, unknown = _fixes_kernel(
-        np.ascontiguousarray(x, f8),
-        np.ascontiguousarray(y, f8),
+        x,
+        y,
         np.ascontiguousarray(time_s, f8),
         accuracy,
-        none if reported is None else np.ascontiguousarray(reported, f8),
+        EMPTY_FLOAT if reported is None else np.ascontiguousarray(reported, f8),
         travel_on and reported is not None,
         float(config.sigma_m),
         float(config.search_radius_m),
@@ -92,23 +100,25 @@ def fixes_of(trace: Trace, x: FloatArray, y: FloatArray, config: MatchConfig) ->
     travel = None
     if travel_on:
         known = reported is not None
+        unknown = read_only(unknown)
         travel = Travel(
-            trace.odometer_m,
-            speed_m if known else None,
-            slack_m if known else None,
+            None if trace.odometer_m is None else read_only(trace.odometer_m),
+            read_only(speed_m) if known else None,
+            read_only(slack_m) if known else None,
             unknown if known else None,
             unknown if known else None,
         )
+    heading = trace.heading_deg
     return Fixes(
         x,
         y,
         time_s,
-        sigma,
-        radius,
-        speed if reported is None else reported,
-        trace.heading_deg,
+        read_only(sigma),
+        read_only(radius),
+        read_only(speed) if reported is None else reported,
+        None if heading is None else read_only(heading),
         travel,
-        np.asarray(trace.segment_starts, dtype=np.int64),
+        read_only(np.asarray(trace.segment_starts, dtype=np.int64)),
         float(sigma_max),
     )
 
@@ -298,8 +308,8 @@ def with_sigma(fixes: Fixes, sigma_m: float, config: MatchConfig) -> Fixes:
     """The fixes with a larger position sigma and the search radius that goes with it."""
     return dataclasses.replace(
         fixes,
-        sigma_m=np.fmax(fixes.sigma_m, sigma_m),
-        radius_m=np.fmax(fixes.radius_m, radius_of_sigma(sigma_m, config)),
+        sigma_m=read_only(np.fmax(fixes.sigma_m, sigma_m)),
+        radius_m=read_only(np.fmax(fixes.radius_m, radius_of_sigma(sigma_m, config))),
         sigma_max_m=float(np.fmax(fixes.sigma_max_m, sigma_m)),
     )
 

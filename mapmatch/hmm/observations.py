@@ -27,6 +27,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from mapmatch.readonly import EMPTY_FLOAT, EMPTY_INT
+
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
     from mapmatch.types import BoolArray, FloatArray, IntArray
@@ -98,7 +100,7 @@ def travel_arrays(
     travel: Travel | None,
 ) -> tuple[FloatArray, FloatArray, FloatArray, IntArray, IntArray]:
     """A :class:`Travel`'s five arrays for the kernels, empty where absent."""
-    none_f, none_i = np.empty(0), np.empty(0, dtype=np.int64)
+    none_f, none_i = EMPTY_FLOAT, EMPTY_INT  # read-only, as the columns are (mapmatch.readonly)
     if travel is None:
         return none_f, none_f, none_f, none_i, none_i
     t = travel
@@ -436,11 +438,9 @@ def merge_fixes(
         np.ascontiguousarray(sigma_m, f8),
         np.ascontiguousarray(radius_m, f8),
         np.ascontiguousarray(speed_mps, f8),
-        np.empty(0) if heading_deg is None else np.ascontiguousarray(heading_deg, f8),
+        EMPTY_FLOAT if heading_deg is None else np.ascontiguousarray(heading_deg, f8),
         *travel_arrays(t),
-        np.empty(0, np.int64)
-        if segment_starts is None
-        else np.ascontiguousarray(segment_starts, np.int64),
+        EMPTY_INT if segment_starts is None else np.ascontiguousarray(segment_starts, np.int64),
         float(config.thinning_sigmas),
         float(config.outlier_max_gap_s),
     )
