@@ -24,6 +24,7 @@ import mapmatch
 import roadnets
 from api.costs import CandidateDensity
 from api.errors import NotReadyError, UnknownNetworkError
+from mapmatch.online.warm import warm_up_live
 from roadnets.errors import MapMatchError, RoadNetworkError
 
 if TYPE_CHECKING:
@@ -80,9 +81,15 @@ class NetworkRegistry:
 
         A failure is kept (see :attr:`failure`) and logged, not raised: the process stays up,
         ``/healthz`` answers, ``/readyz`` and matches answer 503 with the reason. A warm-up
-        match that fails is only logged.
+        match that fails is only logged. Before the networks, the matcher's kernels for every
+        kind of input (:mod:`mapmatch.batch.warm`, a live trip: :mod:`mapmatch.online.warm`),
+        from numba's cache once ``mapmatch network build`` has compiled them.
         """
         started = time.perf_counter()
+        from mapmatch.batch import warm  # noqa: F401 - its import matches on the block
+
+        if not warm_up_live():
+            _log.warning("the live matcher's warm-up failed; the first live trip compiles it")
         try:
             for source in self._sources:
                 net = self._load(source)

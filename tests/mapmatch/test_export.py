@@ -361,7 +361,7 @@ _AWKWARD_NAMES = ('Rue "Grimaldi"', "C:\\Voie", "Straße\tNord\x7f", "\U0001f697
 def _named_block() -> roadnets.RoadNetwork:
     """The warm-up's block of two-way streets, about 100 m a side, each side an awkward name."""
     import roadnets
-    from mapmatch.batch.warm import block_graph
+    from mapmatch.warm_block import block_graph
 
     G: Any = block_graph()
     sides = sorted({tuple(sorted((u, v))) for u, v in G.edges()})

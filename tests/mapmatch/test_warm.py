@@ -5,13 +5,23 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from pathlib import Path
 
 #: Run in a fresh process: the warm-up, then a match of every kind of input a user sends,
 #: printing each kernel that needed a new compiled variant for it (numba compiles one per
-#: argument types: a first request of a kind the warm-up missed waits for the compiler).
+#: argument types: a first request of a kind the warm-up missed waits for the compiler, half a
+#: minute on a slow machine, past a service's time budget). The kinds run on the warm-up's
+#: block and on the embedded network with its route table read from a cache entry (memory
+#: mapped, as a service or a batch worker reads it): every column set, with and without
+#: usable times, dense traces (routes searched) and sparse ones (routes from the table).
 _PROBE = """
-import json, sys
-from mapmatch.batch.warm import WARMUP_S, block_graph
+import itertools, json, sys
+from mapmatch.batch.warm import WARMUP_S
+from mapmatch.online.warm import warm_up_live
+from mapmatch.warm_block import block_network
 import mapmatch, roadnets
 from mapmatch.export import geojson_bytes
 from numba.core.registry import CPUDispatcher
@@ -25,35 +35,104 @@ def variants():
                     out[name + "." + attr] = len(value.signatures)
     return out
 
+def kinds(lon, lat, time, columns):
+    # every set of optional columns, with times and without, and times too far apart to be
+    # believed (the model then ignores them, as a file without times)
+    times = {"times": time, "no times": None, "implausible times": [t * 1e-3 for t in time]}
+    for (said, given), on in itertools.product(
+        times.items(), itertools.product((False, True), repeat=len(columns))
+    ):
+        chosen = {k: v for (k, v), o in zip(columns.items(), on) if o}
+        name = ", ".join([said, *chosen]) if chosen else said
+        yield name, mapmatch.Trace(time=given, lon=lon, lat=lat, **chosen)
+
 assert WARMUP_S > 0, "the warm-up failed"
-net = roadnets.from_graph(block_graph(), network_id="probe")
+assert warm_up_live() > 0, "the live warm-up failed"  # as network build does
+block = block_network()
+n = 5
 lon = [7.4201, 7.4206, 7.4211, 7.4212, 7.4212]
 lat = [43.73001, 43.73002, 43.73001, 43.7304, 43.7308]
 time = [0.0, 5.0, 10.0, 15.0, 20.0]
-kinds = {
-    "no times": mapmatch.Trace(lon=lon, lat=lat),
-    "positions": mapmatch.Trace(time=time, lon=lon, lat=lat),
-    "heading": mapmatch.Trace(time=time, lon=lon, lat=lat, heading=[90, 90, 90, 0, 0]),
-    "accuracy": mapmatch.Trace(time=time, lon=lon, lat=lat, accuracy=[5.0] * 5),
-    "speed": mapmatch.Trace(time=time, lon=lon, lat=lat, speed=[4.0] * 5),
-    "odometer": mapmatch.Trace(time=time, lon=lon, lat=lat, odometer=[0, 40, 80, 110, 150]),
-    "heading, speed": mapmatch.Trace(
-        time=time, lon=lon, lat=lat, heading=[90, 90, 90, 0, 0], speed=[4.0] * 5
-    ),
+columns = {
+    "heading": [90.0, 90.0, 90.0, 0.0, 0.0],
+    "speed": [4.0] * n,
+    "accuracy": [5.0] * n,
+    "odometer": [0.0, 40.0, 80.0, 110.0, 150.0],
 }
+cases = [("block: " + name, trace, block) for name, trace in kinds(lon, lat, time, columns)]
+# points as a service receives them: a column given on some points only, repeated places
+records = [
+    {"time": 10.0, "lon": lon[0], "lat": lat[0], "accuracy": 60.0},
+    {"time": 0.0, "lon": lon[1], "lat": lat[1], "heading": 1e-300, "odometer": 1e-38},
+    {"time": 5.0, "lon": lon[1], "lat": lat[1], "speed": 0.0, "heading": -110.0},
+    {"time": 12.0, "lon": lon[4], "lat": lat[4], "accuracy": 200.0},
+]
+cases.append(("block: records with gaps", mapmatch.Trace.from_records(records), block))
+
+cache = sys.argv[1]
+roadnets.load(roadnets.default_network_path(), cache_dir=cache).sparse_route_table()
+net = roadnets.load(roadnets.default_network_path(), cache_dir=cache)
+assert net.sparse_route_table() is not None
+assert net.route_table_note.startswith("read from the cache entry"), net.route_table_note
+(sample,) = mapmatch.read_traces(mapmatch.__path__[0] + "/data/sample_trace.csv")
+for every in (1, 30):  # a dense trace (routes searched) and a sparse one (from the table)
+    part = slice(None, None, every)
+    lon, lat = sample.lon[part].tolist(), sample.lat[part].tolist()
+    time = sample.time_s[part].tolist()
+    columns = {
+        "heading": sample.heading_deg[part].tolist(),
+        "speed": sample.speed_mps[part].tolist(),
+        "accuracy": sample.accuracy_m[part].tolist(),
+        "odometer": sample.odometer_m[part].tolist(),
+    }
+    for name, trace in kinds(lon, lat, time, columns):
+        cases.append((f"embedded, every {every}: {name}", trace, net))
+
+# the options a request may set that choose a path through the model rather than a number
+options = [
+    {"use_travel": False}, {"estimate_sigma": False}, {"thinning_sigmas": 0.0},
+    {"outlier_sigmas": 0.0}, {"max_candidates": 1}, {"standstill_m": 0.0},
+]
+for name, trace, network in cases[-2 * 3 * 16:]:
+    if name.endswith(("times", "heading, speed, accuracy, odometer")):
+        for option in options:
+            cases.append((f"{name} ({option})", trace, network, option))
 compiled = {}
-for kind, trace in kinds.items():
+for kind, trace, network, *option in cases:
     before = variants()
-    geojson_bytes(mapmatch.match(trace, net))
+    config = mapmatch.MatchConfig(**option[0]) if option else None
+    geojson_bytes(mapmatch.match(trace, network, config))
     compiled[kind] = sorted(k for k, v in variants().items() if v != before.get(k, 0))
+# a live trip (the online matcher matches the open tail of the trip as fixes arrive)
+for name, fields in (
+    ("live: positions", ("time", "lon", "lat")),
+    ("live: every column", ("time", "lon", "lat", "heading", "speed", "accuracy", "odometer")),
+):
+    columns = {
+        "time": sample.time_s, "lon": sample.lon, "lat": sample.lat,
+        "heading": sample.heading_deg, "speed": sample.speed_mps,
+        "accuracy": sample.accuracy_m, "odometer": sample.odometer_m,
+    }
+    before = variants()
+    live = mapmatch.OnlineMatcher(net, lag=30.0, trip_id="probe")
+    for i in range(0, 120, 3):
+        live.push({k: float(columns[k][i]) for k in fields})
+    geojson_bytes(live.close())
+    compiled[name] = sorted(k for k, v in variants().items() if v != before.get(k, 0))
 print(json.dumps(compiled))
 """
 
 
-def test_the_warm_up_compiles_every_kind_of_input() -> None:
+def test_the_warm_up_compiles_every_kind_of_input(tmp_path: Path) -> None:
     done = subprocess.run(
-        [sys.executable, "-c", _PROBE], capture_output=True, text=True, timeout=600, check=False
+        [sys.executable, "-c", _PROBE, str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=900,
+        check=False,
     )
     assert done.returncode == 0, done.stderr
     compiled = json.loads(done.stdout.strip().splitlines()[-1])
-    assert compiled == {kind: [] for kind in compiled}, compiled
+    assert len(compiled) == 3 * 16 + 1 + 2 * 3 * 16 + 2 * 6 * 6 + 2
+    missed = {kind: kernels for kind, kernels in compiled.items() if kernels}
+    assert not missed, missed
