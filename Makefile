@@ -14,8 +14,8 @@ $(BIN)/python:
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
 # After installing, `mapmatch network build` caches the embedded network and compiles the
-# matcher's kernels into numba's on-disk cache (about a minute, once per install), so that the
-# first match of every later process starts in a fraction of a second.
+# matcher's kernels for every kind of input into numba's on-disk cache (a few minutes, once per
+# install), so that the first match of every later process starts in a fraction of a second.
 $(STAMP_RUN): pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e ".[viz]"
 	$(BIN)/mapmatch network build

@@ -59,9 +59,9 @@ def run(args: argparse.Namespace) -> int:
     and prints no build time), builds the R-tree once and compiles the routing kernels
     (:func:`roadnets.warm_kernels`) and the matcher's (short matches,
     :mod:`mapmatch.batch.warm`, and a short live trip, :mod:`mapmatch.online.warm`), reported
-    on lines of their own: compiling them happens once
-    per install (about a minute on a fresh one), not once per network; later processes load
-    them from numba's on-disk cache in a fraction of a second. It then builds the route table
+    on lines of their own: compiling them happens once per install (a few minutes on a fresh
+    one), not once per network; later processes load them from numba's on-disk cache in a
+    fraction of a second. It then builds the route table
     sparse traces are matched with into the cache entry when it fits ``--route-table-mb``
     (:meth:`roadnets.RoadNetwork.sparse_route_table`).
     """
