@@ -5,8 +5,8 @@ A live trip runs the model's stages on the open tail of the trip as fixes arrive
 (:class:`~mapmatch.online.OnlineMatcher`), with kernels and argument types of its own (the
 tail's running totals, the settled part's measures). ``mapmatch network build`` and the
 service's start-up call :func:`warm_up_live` after the whole-trace warm-up (on the block of
-:mod:`mapmatch.warm_block`), so that the
-first fix of the first live trip does not wait for the compiler.
+:mod:`mapmatch.warm_block`), so that the first fix of the first live trip does not wait for the
+compiler.
 """
 
 from __future__ import annotations

@@ -16,7 +16,8 @@ if TYPE_CHECKING:
 #: minute on a slow machine, past a service's time budget). The kinds run on the warm-up's
 #: block and on the embedded network with its route table read from a cache entry (memory
 #: mapped, as a service or a batch worker reads it): every column set, with and without
-#: usable times, dense traces (routes searched) and sparse ones (routes from the table).
+#: usable times, dense traces (routes searched) and sparse ones (routes from the table), with
+#: the options that choose a path through the model; records with gaps; two live trips.
 _PROBE = """
 import itertools, json, sys
 from mapmatch.batch.warm import WARMUP_S
