@@ -80,15 +80,18 @@ def fixes_of(trace: Trace, x: FloatArray, y: FloatArray, config: MatchConfig) ->
     x, y = read_only(np.ascontiguousarray(x, f8)), read_only(np.ascontiguousarray(y, f8))
     given = trace.accuracy_m
     accuracy = EMPTY_FLOAT if given is None else read_only(np.ascontiguousarray(given, f8))
-    time_s = read_only(trace.time_s if trace.has_time else np.full(n, np.nan))
-    reported = None if trace.speed_mps is None else read_only(trace.speed_mps)
+    time_s = read_only(
+        np.ascontiguousarray(trace.time_s, f8) if trace.has_time else np.full(n, np.nan)
+    )
+    speeds = trace.speed_mps
+    reported = None if speeds is None else read_only(np.ascontiguousarray(speeds, f8))
     travel_on = config.use_travel and (trace.odometer_m is not None or reported is not None)
     sigma, sigma_max, radius, speed, speed_m, slack_m, unknown = _fixes_kernel(
         x,
         y,
-        np.ascontiguousarray(time_s, f8),
+        time_s,
         accuracy,
-        EMPTY_FLOAT if reported is None else np.ascontiguousarray(reported, f8),
+        EMPTY_FLOAT if reported is None else reported,
         travel_on and reported is not None,
         float(config.sigma_m),
         float(config.search_radius_m),

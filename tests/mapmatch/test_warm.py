@@ -22,7 +22,7 @@ _PROBE = """
 import itertools, json, sys
 from mapmatch.batch.warm import WARMUP_S
 from mapmatch.online.warm import warm_up_live
-from mapmatch.warm_block import block_network
+from mapmatch.warm_block import BLOCK_FIXES, OPTIONAL_COLUMNS, block_network
 import mapmatch, roadnets
 from mapmatch.export import geojson_bytes
 from numba.core.registry import CPUDispatcher
@@ -50,16 +50,8 @@ def kinds(lon, lat, time, columns):
 assert WARMUP_S > 0, "the warm-up failed"
 assert warm_up_live() > 0, "the live warm-up failed"  # as network build does
 block = block_network()
-n = 5
-lon = [7.4201, 7.4206, 7.4211, 7.4212, 7.4212]
-lat = [43.73001, 43.73002, 43.73001, 43.7304, 43.7308]
-time = [0.0, 5.0, 10.0, 15.0, 20.0]
-columns = {
-    "heading": [90.0, 90.0, 90.0, 0.0, 0.0],
-    "speed": [4.0] * n,
-    "accuracy": [5.0] * n,
-    "odometer": [0.0, 40.0, 80.0, 110.0, 150.0],
-}
+lon, lat, time = ([fix[k] for fix in BLOCK_FIXES] for k in ("lon", "lat", "time"))
+columns = {k: [fix[k] for fix in BLOCK_FIXES] for k in OPTIONAL_COLUMNS}
 cases = [("block: " + name, trace, block) for name, trace in kinds(lon, lat, time, columns)]
 # points as a service receives them: a column given on some points only, repeated places
 records = [
