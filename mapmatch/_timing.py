@@ -20,6 +20,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numba import njit
 
+from mapmatch.frozen import quick_init
+
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
@@ -75,6 +77,7 @@ class EdgeTimes:
     exit_s: FloatArray
 
 
+@quick_init
 @dataclass(frozen=True, slots=True)
 class SegmentPaths:
     """

@@ -9,6 +9,8 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
+from mapmatch.frozen import quick_init
+
 if TYPE_CHECKING:
     from mapmatch.types import BoolArray, FloatArray
 
@@ -28,6 +30,7 @@ Evidence = Literal["positions", "heading", "odometer"]
 _log = logging.getLogger("mapmatch")
 
 
+@quick_init
 @dataclass(frozen=True, slots=True)
 class DistanceCheck:
     """

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mapmatch.frozen import quick_init
 from roadnets.names import edge_records
 
 if TYPE_CHECKING:
@@ -385,6 +386,7 @@ def _restore_segment(args: tuple[Any, ...], known: dict[str, Any]) -> Segment:
     return Segment(*args, **known)
 
 
+@quick_init
 @dataclass(frozen=True, slots=True)
 class MatchedPoints:
     """
@@ -414,6 +416,7 @@ class MatchedPoints:
     outlier: BoolArray
 
 
+@quick_init
 @dataclass(frozen=True, slots=True)
 class MatchStats:
     """
@@ -500,6 +503,7 @@ class Diagnostics:
         return pd.DataFrame(columns)
 
 
+@quick_init
 @dataclass(frozen=True)
 class MatchResult:
     """

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from mapmatch.frozen import quick_init
 from mapmatch.hmm.geometry import point_on_edge, project_kernel, stretch_vertices
 from mapmatch.hmm.loops import chosen_scatter_kernel
 from mapmatch.hmm.network_inputs import network_inputs
@@ -43,6 +44,7 @@ if TYPE_CHECKING:
 __all__ = ["Assembled", "assemble", "fixes_on_piece", "path_uturns"]
 
 
+@quick_init
 @dataclass(frozen=True, slots=True)
 class Assembled:
     """Segments and per-fix outcome of a solved trace."""

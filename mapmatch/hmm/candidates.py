@@ -9,6 +9,7 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
+from mapmatch.frozen import quick_init
 from roadnets.spatial import PLACE_SEPARATION_M, packed_arrays
 from roadnets.spatial_kernels import nearby_kernel
 
@@ -34,6 +35,7 @@ __all__ = [
 EDGES_PER_PLACE = 2
 
 
+@quick_init
 @dataclass(frozen=True, slots=True)
 class Candidates:
     """

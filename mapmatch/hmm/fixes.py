@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from mapmatch.frozen import quick_init
 from mapmatch.hmm.candidates import (
     Candidates,
     find_candidates,
@@ -45,6 +46,7 @@ __all__ = [
 ]
 
 
+@quick_init
 @dataclass(frozen=True, slots=True)
 class Fixes:
     """

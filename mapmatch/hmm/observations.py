@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from mapmatch.frozen import quick_init
 from mapmatch.readonly import EMPTY_FLOAT, EMPTY_INT
 
 if TYPE_CHECKING:
@@ -113,6 +114,7 @@ def travel_arrays(
     )
 
 
+@quick_init
 @dataclass(frozen=True, slots=True)
 class Travel:
     """
@@ -133,6 +135,7 @@ class Travel:
     unknown_hi: IntArray | None
 
 
+@quick_init
 @dataclass(frozen=True, slots=True)
 class Observations:
     """

@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from mapmatch.frozen import quick_init
+
 if TYPE_CHECKING:
     from mapmatch.hmm.candidates import Candidates
     from mapmatch.types import FloatArray, IntArray
@@ -13,6 +15,7 @@ if TYPE_CHECKING:
 __all__ = ["Solution"]
 
 
+@quick_init
 @dataclass(frozen=True, slots=True)
 class Solution:
     """
