@@ -26,6 +26,7 @@ from numba import njit
 from mapmatch._jsontext import Packed
 from mapmatch._sums import path_length_m
 from mapmatch._timing import SegmentPaths, place_and_time_kernel, span_times, speeds_kph
+from mapmatch.readonly import read_only
 from roadnets.names_kernel import edge_records_kernel
 from roadnets.spatial_kernels import path_lonlat_kernel
 
@@ -210,7 +211,7 @@ def feature_columns(result: MatchResult) -> Packed:
                    paths.end_m)  # fmt: skip
     p = result.points
     points = (
-        p.segment, p.matched, p.edge, p.offset_m, p.time_s, p.lon, p.lat, p.distance_m,
+        p.segment, p.matched, p.edge, p.offset_m, read_only(p.time_s), p.lon, p.lat, p.distance_m,
         p.confidence, p.u, p.v, p.key, p.interpolated, p.outlier,
     )  # fmt: skip
     net = _one_network(segs)

@@ -24,6 +24,7 @@ from numba import njit
 from mapmatch._timing import SegmentPaths
 from mapmatch.hmm.assemble import fixes_on_piece
 from mapmatch.hmm.observations import sigma_of_distances
+from mapmatch.readonly import EMPTY_FLOAT, read_only
 from mapmatch.result import MatchedPoints, Segment
 from roadnets.spatial_kernels import points_on_edges
 
@@ -283,8 +284,8 @@ def odometer_ends(
         (paths.index, paths.first, paths.last, paths.bounds, paths.edge, paths.start_m,
          paths.end_m),
         (p.matched, p.interpolated, p.segment, p.edge, p.offset_m),
-        fix_x, fix_y, np.ascontiguousarray(odometer_m, dtype=np.float64),
-        _NO_RADIUS if radius_m is None else radius_m,
+        fix_x, fix_y, read_only(np.ascontiguousarray(odometer_m, dtype=np.float64)),
+        _NO_RADIUS if radius_m is None else read_only(np.ascontiguousarray(radius_m, np.float64)),
         (float(config.sigma_m), float(config.odometer_end_sigmas)), net.kernel_geometry,
     )  # fmt: skip
     out = [
@@ -307,7 +308,7 @@ def odometer_ends(
 
 
 #: ``radius_m`` of :func:`_ends_kernel` when no fix has one.
-_NO_RADIUS = np.empty(0)
+_NO_RADIUS = EMPTY_FLOAT
 
 
 def _unmatched(

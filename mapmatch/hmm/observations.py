@@ -22,13 +22,13 @@ path still runs through every observation.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba import njit
 
 from mapmatch.frozen import quick_init
-from mapmatch.readonly import EMPTY_FLOAT, EMPTY_INT
+from mapmatch.readonly import EMPTY_FLOAT, EMPTY_INT, read_only
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -100,18 +100,24 @@ def between_kernel(index, odometer, speed_m, slack_m, unknown_lo, unknown_hi):  
 def travel_arrays(
     travel: Travel | None,
 ) -> tuple[FloatArray, FloatArray, FloatArray, IntArray, IntArray]:
-    """A :class:`Travel`'s five arrays for the kernels, empty where absent."""
-    none_f, none_i = EMPTY_FLOAT, EMPTY_INT  # read-only, as the columns are (mapmatch.readonly)
-    if travel is None:
-        return none_f, none_f, none_f, none_i, none_i
+    """A :class:`Travel`'s five arrays for the kernels, read-only, empty where absent."""
     t = travel
+    if t is None:
+        return EMPTY_FLOAT, EMPTY_FLOAT, EMPTY_FLOAT, EMPTY_INT, EMPTY_INT
     return (
-        none_f if t.odometer_m is None else np.ascontiguousarray(t.odometer_m, np.float64),
-        none_f if t.speed_m is None else np.ascontiguousarray(t.speed_m, np.float64),
-        none_f if t.slack_m is None else np.ascontiguousarray(t.slack_m, np.float64),
-        none_i if t.unknown_lo is None else np.ascontiguousarray(t.unknown_lo, np.int64),
-        none_i if t.unknown_hi is None else np.ascontiguousarray(t.unknown_hi, np.int64),
+        _kernel_column(t.odometer_m, EMPTY_FLOAT),
+        _kernel_column(t.speed_m, EMPTY_FLOAT),
+        _kernel_column(t.slack_m, EMPTY_FLOAT),
+        _kernel_column(t.unknown_lo, EMPTY_INT),
+        _kernel_column(t.unknown_hi, EMPTY_INT),
     )
+
+
+def _kernel_column(values: Any, missing: Any) -> Any:
+    """``values`` contiguous and read-only, as the kernels take them (``missing`` if None)."""
+    if values is None:
+        return missing
+    return read_only(np.ascontiguousarray(values, missing.dtype))
 
 
 @quick_init
@@ -280,18 +286,19 @@ def group_fixes(
     if config.thinning_sigmas <= 0:
         return np.arange(n, dtype=np.int64), np.zeros(n, dtype=bool)
     radius = config.thinning_sigmas * np.asarray(sigma_m, dtype=np.float64)
-    starts = np.zeros(0, np.int64) if segment_starts is None else segment_starts
+    # read-only, as merge_fixes hands them on (one compiled variant of each kernel)
+    starts = _kernel_column(segment_starts, EMPTY_INT)
     # a stray is noise, seen between fixes close in time (an outlier, a multipath jump); at
     # sparse sampling a fix that leaves and comes back is a car that drove somewhere and back
-    times = np.empty(0) if time_s is None else np.asarray(time_s, dtype=np.float64)
+    times = _kernel_column(time_s, EMPTY_FLOAT)
     group, stray = _group_kernel(
-        np.asarray(x, np.float64),
-        np.asarray(y, np.float64),
+        _kernel_column(x, EMPTY_FLOAT),
+        _kernel_column(y, EMPTY_FLOAT),
         radius,
-        _solo(n, np.asarray(starts, dtype=np.int64)),
+        _solo(n, starts),
         times,
         float(config.outlier_max_gap_s),
-        np.zeros(0),
+        np.zeros(0),  # no travel steps: writable, as merge_fixes' own are (computed)
     )
     return np.asarray(group, dtype=np.int64), np.asarray(stray, dtype=bool)
 
