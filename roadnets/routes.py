@@ -269,6 +269,11 @@ _GRAPHS: dict[tuple[int, int], tuple[NetworkArrays, TurnGraph, tuple[npt.NDArray
 _local = threading.local()
 
 
+#: The turn costs of a search without any: empty and read-only, as given ones are made.
+_NO_TURN_COSTS = np.zeros(0)
+_NO_TURN_COSTS.flags.writeable = False
+
+
 def search_graph(arrays: NetworkArrays, turns: TurnGraph) -> tuple[npt.NDArray[Any], ...]:
     """
     The network arrays :func:`~roadnets.route_search.search_many` reads, made once per network.
@@ -293,7 +298,7 @@ def search_graph(arrays: NetworkArrays, turns: TurnGraph) -> tuple[npt.NDArray[A
         arrays.edge_length_m,
         edge_time,
         arrays.edge_length_m,
-        np.zeros(0),
+        _NO_TURN_COSTS,
     )
     if len(_GRAPHS) >= 8:
         _GRAPHS.pop(next(iter(_GRAPHS)))
@@ -361,7 +366,7 @@ def _search_arrays(
     if edge_cost is None and turn_cost is None:
         return graph, float(uturn_cost_m)
     edge_key = _costs(edge_cost, arrays.n_edges, "edge_cost", arrays.edge_length_m)
-    trans_key = _costs(turn_cost, len(turns.trans_to), "turn_cost", np.zeros(0))
+    trans_key = _costs(turn_cost, len(turns.trans_to), "turn_cost", _NO_TURN_COSTS)
     # the pruning at junctions assumes a U-turn is the only move with a cost of its own
     plain = turns.plain if turn_cost is None else np.zeros(turns.n_states, dtype=np.bool_)
     return (*graph[:3], plain, *graph[4:8], edge_key, trans_key), float(uturn_cost_m)
@@ -400,9 +405,11 @@ def _table(
 
 
 def _costs(given: FloatArray | None, size: int, name: str, default: FloatArray) -> FloatArray:
+    """The caller's costs checked, as a read-only copy (as the network's arrays are)."""
     if given is None:
         return default
-    out = np.ascontiguousarray(given, dtype=np.float64)
+    out = np.array(given, dtype=np.float64)
+    out.flags.writeable = False
     if out.shape != (size,):
         msg = f"{name} has shape {out.shape}; give one cost per entry, shape ({size},)"
         raise ValueError(msg)

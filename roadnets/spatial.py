@@ -420,11 +420,12 @@ def query_packed(
     The probe and everything after it run compiled, without the GIL, so threads query one
     network at once.
     """
-    x = np.ascontiguousarray(x, dtype=np.float64)
-    y = np.ascontiguousarray(y, dtype=np.float64)
-    radius = np.ascontiguousarray(
-        np.broadcast_to(np.asarray(radius_m, dtype=np.float64), x.shape), dtype=np.float64
-    )
+    # copies of their own, read-only as the matcher's are: one compiled variant for both
+    x = np.array(x, dtype=np.float64)
+    y = np.array(y, dtype=np.float64)
+    radius = np.array(np.broadcast_to(np.asarray(radius_m, dtype=np.float64), x.shape))
+    for column in (x, y, radius):
+        column.flags.writeable = False
     from roadnets.spatial_kernels import nearby_kernel  # numba: imported when first needed
 
     top = 0 if max_per_point is None else int(max_per_point)
