@@ -210,6 +210,8 @@ def feature_columns(result: MatchResult) -> Packed:
     path_arrays = (paths.index, paths.first, paths.last, paths.bounds, paths.edge, paths.start_m,
                    paths.end_m)  # fmt: skip
     p = result.points
+    # the points' times are the trace's read-only column, or a copy of them (an unpickled
+    # result, a live trip): read-only either way, so that the kernel has one variant
     points = (
         p.segment, p.matched, p.edge, p.offset_m, read_only(p.time_s), p.lon, p.lat, p.distance_m,
         p.confidence, p.u, p.v, p.key, p.interpolated, p.outlier,

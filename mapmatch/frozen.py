@@ -3,10 +3,10 @@ Frozen dataclasses that are quick to make.
 
 A frozen dataclass's generated ``__init__`` stores each field through ``object.__setattr__``
 (its own ``__setattr__`` refuses), about 0.2-0.3 us a field on CPython 3.11; a match makes
-ten such objects with about a hundred fields between them, some 30 us a trace.
-:func:`quick_init` gives such a class an ``__init__`` of the same signature that stores each
-field straight into its slot (through the slot's descriptor) or into the instance's
-dictionary: a third of the time, and the instance as frozen afterwards as before.
+ten such objects with about a hundred fields between them. :func:`quick_init` gives such a
+class an ``__init__`` of the same signature that stores each field straight into its slot
+(through the slot's descriptor) or into the instance's dictionary: a 14-field object in 1.2 us
+instead of 3.1, 15-20 us a trace, and the instance as frozen afterwards as before.
 
 Only a plain dataclass qualifies: every field in ``__init__``, no ``default_factory``, no
 keyword-only fields and no ``__post_init__``; anything else is refused when the class is

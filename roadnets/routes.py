@@ -405,10 +405,10 @@ def _table(
 
 
 def _costs(given: FloatArray | None, size: int, name: str, default: FloatArray) -> FloatArray:
-    """The caller's costs checked, as a read-only copy (as the network's arrays are)."""
+    """The caller's costs checked, as a read-only view (as the network's own arrays are)."""
     if given is None:
         return default
-    out = np.array(given, dtype=np.float64)
+    out = np.ascontiguousarray(given, dtype=np.float64).view()
     out.flags.writeable = False
     if out.shape != (size,):
         msg = f"{name} has shape {out.shape}; give one cost per entry, shape ({size},)"

@@ -359,7 +359,7 @@ class OnlineMatcher:
             self.max_lag_s = None if math.isinf(cap) else cap
         self.trip_id = str(trip_id)
         self._tail: Tail | None = None
-        self._record = Record(np.asarray(net.arrays.edge_twin, dtype=np.int64))
+        self._record = Record(net.arrays.edge_twin)  # as the assembly reads it (one variant)
         self._anchor: _Anchor | None = None
         self._open_fix = 0  # trip number of the first unsettled fix
         self._segment = -1  # the segment the settled path ends in

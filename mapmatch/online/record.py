@@ -21,6 +21,7 @@ from mapmatch.result import MatchedPoints, Segment
 if TYPE_CHECKING:
     from mapmatch.types import FloatArray, IntArray
     from roadnets import RoadNetwork
+    from roadnets.arrays import Int32Array
 
 __all__ = ["Record", "concat_points", "empty_points"]
 
@@ -60,7 +61,7 @@ class _Path:
 class Record:
     """The settled part of a live trip (see the module docstring)."""
 
-    def __init__(self, edge_twin: IntArray) -> None:
+    def __init__(self, edge_twin: Int32Array) -> None:
         self._twin = edge_twin
         self._paths: list[_Path] = []
         self._chunks: list[MatchedPoints] = []

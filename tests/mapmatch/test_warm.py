@@ -122,8 +122,6 @@ print(json.dumps({"compiled": compiled, "variants": variants()}))
 SEVERAL_VARIANTS = {
     # a trace's read-only columns, and a network's own node arrays as it is built
     "_forward": 2,
-    # the network's int32 edge twins, and a path's int64 edges
-    "path_uturns": 2,
 }
 
 
