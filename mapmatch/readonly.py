@@ -14,12 +14,12 @@ warm-up's variant serves every input.
 
 from __future__ import annotations
 
-from typing import Any, TypeVar
+from typing import Any, TypeVar, cast
 
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["EMPTY_FLOAT", "EMPTY_INT", "read_only"]
+__all__ = ["EMPTY_FLOAT", "EMPTY_INT", "kernel_column", "read_only"]
 
 _A = TypeVar("_A", bound=npt.NDArray[Any])
 
@@ -42,6 +42,24 @@ def read_only(array: _A) -> _A:
     view = array.view()
     view.flags.writeable = False
     return view
+
+
+def kernel_column(values: npt.ArrayLike | None, missing: _A) -> _A:
+    """
+    ``values`` as a kernel takes a column: contiguous, of ``missing``'s dtype, read-only.
+
+    ``missing`` (:data:`EMPTY_FLOAT`, :data:`EMPTY_INT`) stands in where ``values`` is None.
+
+    Examples
+    --------
+    >>> kernel_column([1, 2], EMPTY_FLOAT)
+    array([1., 2.])
+    >>> kernel_column(None, EMPTY_INT) is EMPTY_INT
+    True
+    """
+    if values is None:
+        return missing
+    return cast("_A", read_only(np.ascontiguousarray(values, missing.dtype)))
 
 
 #: What stands in for a missing float column: empty and read-only.

@@ -24,7 +24,7 @@ from numba import njit
 from mapmatch._timing import SegmentPaths
 from mapmatch.hmm.assemble import fixes_on_piece
 from mapmatch.hmm.observations import sigma_of_distances
-from mapmatch.readonly import EMPTY_FLOAT, read_only
+from mapmatch.readonly import EMPTY_FLOAT, kernel_column
 from mapmatch.result import MatchedPoints, Segment
 from roadnets.spatial_kernels import points_on_edges
 
@@ -284,8 +284,8 @@ def odometer_ends(
         (paths.index, paths.first, paths.last, paths.bounds, paths.edge, paths.start_m,
          paths.end_m),
         (p.matched, p.interpolated, p.segment, p.edge, p.offset_m),
-        fix_x, fix_y, read_only(np.ascontiguousarray(odometer_m, dtype=np.float64)),
-        _NO_RADIUS if radius_m is None else read_only(np.ascontiguousarray(radius_m, np.float64)),
+        fix_x, fix_y, kernel_column(odometer_m, EMPTY_FLOAT),
+        kernel_column(radius_m, EMPTY_FLOAT),
         (float(config.sigma_m), float(config.odometer_end_sigmas)), net.kernel_geometry,
     )  # fmt: skip
     out = [
@@ -305,10 +305,6 @@ def odometer_ends(
     if not len(lost):
         return out, placed
     return _unmatched(out, placed, lost, net)
-
-
-#: ``radius_m`` of :func:`_ends_kernel` when no fix has one.
-_NO_RADIUS = EMPTY_FLOAT
 
 
 def _unmatched(

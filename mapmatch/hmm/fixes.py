@@ -25,7 +25,7 @@ from mapmatch.hmm.candidates import (
     sigma_radius_kernel,
 )
 from mapmatch.hmm.observations import Observations, Travel, merge_fixes, sigma_of_distances
-from mapmatch.readonly import EMPTY_FLOAT, read_only
+from mapmatch.readonly import EMPTY_FLOAT, kernel_column, read_only
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -80,8 +80,7 @@ def fixes_of(trace: Trace, x: FloatArray, y: FloatArray, config: MatchConfig) ->
     n = len(x)
     f8 = np.float64
     x, y = read_only(np.ascontiguousarray(x, f8)), read_only(np.ascontiguousarray(y, f8))
-    given = trace.accuracy_m
-    accuracy = EMPTY_FLOAT if given is None else read_only(np.ascontiguousarray(given, f8))
+    accuracy = kernel_column(trace.accuracy_m, EMPTY_FLOAT)
     time_s = read_only(
         np.ascontiguousarray(trace.time_s, f8) if trace.has_time else np.full(n, np.nan)
     )

@@ -22,13 +22,13 @@ path still runs through every observation.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
 
 from mapmatch.frozen import quick_init
-from mapmatch.readonly import EMPTY_FLOAT, EMPTY_INT, read_only
+from mapmatch.readonly import EMPTY_FLOAT, EMPTY_INT, kernel_column
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -105,19 +105,12 @@ def travel_arrays(
     if t is None:
         return EMPTY_FLOAT, EMPTY_FLOAT, EMPTY_FLOAT, EMPTY_INT, EMPTY_INT
     return (
-        _kernel_column(t.odometer_m, EMPTY_FLOAT),
-        _kernel_column(t.speed_m, EMPTY_FLOAT),
-        _kernel_column(t.slack_m, EMPTY_FLOAT),
-        _kernel_column(t.unknown_lo, EMPTY_INT),
-        _kernel_column(t.unknown_hi, EMPTY_INT),
+        kernel_column(t.odometer_m, EMPTY_FLOAT),
+        kernel_column(t.speed_m, EMPTY_FLOAT),
+        kernel_column(t.slack_m, EMPTY_FLOAT),
+        kernel_column(t.unknown_lo, EMPTY_INT),
+        kernel_column(t.unknown_hi, EMPTY_INT),
     )
-
-
-def _kernel_column(values: Any, missing: Any) -> Any:
-    """``values`` contiguous and read-only, as the kernels take them (``missing`` if None)."""
-    if values is None:
-        return missing
-    return read_only(np.ascontiguousarray(values, missing.dtype))
 
 
 @quick_init
@@ -287,13 +280,13 @@ def group_fixes(
         return np.arange(n, dtype=np.int64), np.zeros(n, dtype=bool)
     radius = config.thinning_sigmas * np.asarray(sigma_m, dtype=np.float64)
     # read-only, as merge_fixes hands them on (one compiled variant of each kernel)
-    starts = _kernel_column(segment_starts, EMPTY_INT)
+    starts = kernel_column(segment_starts, EMPTY_INT)
     # a stray is noise, seen between fixes close in time (an outlier, a multipath jump); at
     # sparse sampling a fix that leaves and comes back is a car that drove somewhere and back
-    times = _kernel_column(time_s, EMPTY_FLOAT)
+    times = kernel_column(time_s, EMPTY_FLOAT)
     group, stray = _group_kernel(
-        _kernel_column(x, EMPTY_FLOAT),
-        _kernel_column(y, EMPTY_FLOAT),
+        kernel_column(x, EMPTY_FLOAT),
+        kernel_column(y, EMPTY_FLOAT),
         radius,
         _solo(n, starts),
         times,
