@@ -19,7 +19,7 @@ from typing import Any, TypeVar, cast
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["EMPTY_FLOAT", "EMPTY_INT", "kernel_column", "read_only"]
+__all__ = ["EMPTY_FLOAT", "EMPTY_INT", "kernel_array", "kernel_column", "read_only"]
 
 _A = TypeVar("_A", bound=npt.NDArray[Any])
 
@@ -44,6 +44,24 @@ def read_only(array: _A) -> _A:
     return view
 
 
+def kernel_array(values: npt.ArrayLike, dtype: npt.DTypeLike = np.float64) -> npt.NDArray[Any]:
+    """
+    ``values`` as a kernel takes an array: contiguous, of ``dtype``, read-only.
+
+    No copy where ``values`` already is one (a trace's column); a read-only view of a
+    writable one (the caller's stays writable).
+
+    Examples
+    --------
+    >>> a = kernel_array([1, 2])
+    >>> a, a.flags.writeable
+    (array([1., 2.]), False)
+    >>> kernel_array(a) is a
+    True
+    """
+    return read_only(np.ascontiguousarray(values, dtype))
+
+
 def kernel_column(values: npt.ArrayLike | None, missing: _A) -> _A:
     """
     ``values`` as a kernel takes a column: contiguous, of ``missing``'s dtype, read-only.
@@ -59,7 +77,7 @@ def kernel_column(values: npt.ArrayLike | None, missing: _A) -> _A:
     """
     if values is None:
         return missing
-    return cast("_A", read_only(np.ascontiguousarray(values, missing.dtype)))
+    return cast("_A", kernel_array(values, missing.dtype))
 
 
 #: What stands in for a missing float column: empty and read-only.

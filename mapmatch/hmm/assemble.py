@@ -31,7 +31,7 @@ from mapmatch.hmm.network_inputs import network_inputs
 from mapmatch.hmm.observations import travel_arrays
 from mapmatch.hmm.params import model_params
 from mapmatch.hmm.pathwalk import walk_pieces
-from mapmatch.readonly import read_only
+from mapmatch.readonly import kernel_array
 from mapmatch.result import MatchedPoints, Segment
 
 if TYPE_CHECKING:
@@ -373,8 +373,7 @@ def assemble(
     """
     c, used, states = solution.cands, solution.used, solution.states
     f8 = np.float64
-    x = read_only(np.ascontiguousarray(x, f8))  # as every caller's (mapmatch.readonly)
-    y = read_only(np.ascontiguousarray(y, f8))
+    x, y = kernel_array(x), kernel_array(y)  # read-only, whichever caller's (one variant)
     radius = np.ascontiguousarray(radius_m, f8)
     p_lo, p_hi = solution.piece_start, solution.piece_stop
     record, record_state, record_pred = solution.route_records

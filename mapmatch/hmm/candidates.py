@@ -10,7 +10,7 @@ import numpy.typing as npt
 from numba import njit
 
 from mapmatch.frozen import quick_init
-from mapmatch.readonly import read_only
+from mapmatch.readonly import kernel_array
 from roadnets.spatial import PLACE_SEPARATION_M, packed_arrays
 from roadnets.spatial_kernels import nearby_kernel
 
@@ -225,9 +225,9 @@ def find_candidates(
     """
     args = (
         *packed_arrays(net.segment_tree, net.arrays),
-        read_only(np.ascontiguousarray(x, dtype=np.float64)),  # whichever caller's (one variant)
-        read_only(np.ascontiguousarray(y, dtype=np.float64)),
-        read_only(np.ascontiguousarray(radius_m, dtype=np.float64)),
+        kernel_array(x),  # read-only, whichever caller's (one variant)
+        kernel_array(y),
+        kernel_array(radius_m),
         edges_searched(config),
         PLACE_SEPARATION_M,
     )

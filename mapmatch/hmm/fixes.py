@@ -25,7 +25,7 @@ from mapmatch.hmm.candidates import (
     sigma_radius_kernel,
 )
 from mapmatch.hmm.observations import Observations, Travel, merge_fixes, sigma_of_distances
-from mapmatch.readonly import EMPTY_FLOAT, kernel_column, read_only
+from mapmatch.readonly import EMPTY_FLOAT, kernel_array, kernel_column, read_only
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -78,14 +78,11 @@ def fixes_of(trace: Trace, x: FloatArray, y: FloatArray, config: MatchConfig) ->
     read them have one compiled variant whichever columns a trace has.
     """
     n = len(x)
-    f8 = np.float64
-    x, y = read_only(np.ascontiguousarray(x, f8)), read_only(np.ascontiguousarray(y, f8))
+    x, y = kernel_array(x), kernel_array(y)
     accuracy = kernel_column(trace.accuracy_m, EMPTY_FLOAT)
-    time_s = read_only(
-        np.ascontiguousarray(trace.time_s, f8) if trace.has_time else np.full(n, np.nan)
-    )
+    time_s = kernel_array(trace.time_s if trace.has_time else np.full(n, np.nan))
     speeds = trace.speed_mps
-    reported = None if speeds is None else read_only(np.ascontiguousarray(speeds, f8))
+    reported = None if speeds is None else kernel_array(speeds)
     travel_on = config.use_travel and (trace.odometer_m is not None or reported is not None)
     sigma, sigma_max, radius, speed, speed_m, slack_m, unknown = _fixes_kernel(
         x,

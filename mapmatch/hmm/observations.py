@@ -28,7 +28,7 @@ import numpy as np
 from numba import njit
 
 from mapmatch.frozen import quick_init
-from mapmatch.readonly import EMPTY_FLOAT, EMPTY_INT, kernel_column
+from mapmatch.readonly import EMPTY_FLOAT, EMPTY_INT, kernel_array, kernel_column
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
@@ -285,8 +285,8 @@ def group_fixes(
     # sparse sampling a fix that leaves and comes back is a car that drove somewhere and back
     times = kernel_column(time_s, EMPTY_FLOAT)
     group, stray = _group_kernel(
-        kernel_column(x, EMPTY_FLOAT),
-        kernel_column(y, EMPTY_FLOAT),
+        kernel_array(x),
+        kernel_array(y),
         radius,
         _solo(n, starts),
         times,
