@@ -49,6 +49,9 @@ PARAMS = (
     "course_prune_deg",
     "service_penalty",
     "service_speed_mps",
+    "search_radius_m",
+    "core_radius_sigmas",
+    "far_candidates",
 )
 (
     P_MAX_EMISSION_PENALTY,
@@ -81,6 +84,9 @@ PARAMS = (
     P_COURSE_PRUNE,
     P_SERVICE_PENALTY,
     P_SERVICE_SPEED,
+    P_SEARCH_RADIUS,
+    P_CORE_RADIUS_SIGMAS,
+    P_FAR_CANDIDATES,
 ) = range(len(PARAMS))
 
 _CACHE: dict[tuple[int, tuple[str, ...]], tuple[MatchConfig, FloatArray]] = {}

@@ -26,9 +26,12 @@ from mapmatch.hmm.network_inputs import network_inputs
 from mapmatch.hmm.observations import between_kernel, travel_arrays
 from mapmatch.hmm.params import (
     P_CANDIDATE_MARGIN,
+    P_CORE_RADIUS_SIGMAS,
     P_COURSE_PRUNE,
+    P_FAR_CANDIDATES,
     P_MAX_CANDIDATES,
     P_MIN_LOG_TRANSITION,
+    P_SEARCH_RADIUS,
     model_params,
 )
 from mapmatch.hmm.pathwalk import EPS_M
@@ -149,6 +152,24 @@ def _courses(used, ox, oy, otime, osigma, params):  # type: ignore[no-untyped-de
     return course
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _core_reach(c_dist, lo, hi, sigma, params):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """
+    The end of the rows ``lo:hi`` of one observation (nearest first) that enter the model.
+
+    Every row within the core radius (``core_radius_sigmas`` x ``sigma``, at least
+    ``search_radius_m``) and the ``far_candidates`` nearest beyond it; every row when none is
+    within the core.
+    """
+    core_m = max(params[P_SEARCH_RADIUS], params[P_CORE_RADIUS_SIGMAS] * sigma)
+    core = lo
+    while core < hi and c_dist[core] <= core_m:
+        core += 1
+    if core == lo:
+        return hi
+    return min(hi, core + int(params[P_FAR_CANDIDATES]))
+
+
 @njit(cache=True, nogil=True)
 def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     network, cands, used, cut_after, obs, course, pace, travel, params
@@ -190,7 +211,8 @@ def solve_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     m = 0
     for i in range(n):
         u = used[i]
-        lo, hi = c_ptr[u], c_ptr[u + 1]
+        lo = c_ptr[u]
+        hi = _core_reach(c_dist, lo, c_ptr[u + 1], osigma[u], params)
         best = -np.inf
         weight = speed_weight(ospeed[u], params) if has_heading else 0.0
         for r in range(lo, hi):

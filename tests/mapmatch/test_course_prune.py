@@ -9,26 +9,11 @@ import numpy as np
 import mapmatch
 from mapmatch.evaluation.accuracy.conditions import condition_config
 from mapmatch.evaluation.simulate import simulate_trips, strip_to_class
-from mapmatch.hmm.fixes import fixes_of, observe
-from mapmatch.hmm.selection import find_displaced
-from mapmatch.hmm.trellis import model_fixes, solve
+from mapmatch.hmm.trellis import solve
+from tests.mapmatch.solving import solved
 
 if TYPE_CHECKING:
     import roadnets
-    from mapmatch.hmm.candidates import Candidates
-    from mapmatch.hmm.observations import Observations
-    from mapmatch.hmm.solution import Solution
-
-
-def _solved(
-    net: roadnets.RoadNetwork, trace: mapmatch.Trace, config: mapmatch.MatchConfig
-) -> tuple[Observations, Candidates, Solution]:
-    x, y = net.project(trace.lon, trace.lat)
-    fixes = fixes_of(trace, x, y, config)
-    obs, cands = observe(net, fixes, config)
-    outlier = find_displaced(fixes, obs, cands, config)
-    used, _, cut_after = model_fixes(cands, outlier, fixes.segment_starts, obs.first)
-    return obs, cands, solve(net, obs, cands, used, cut_after, config)
 
 
 def _trips(net: roadnets.RoadNetwork, count: int = 3) -> list[mapmatch.Trace]:
@@ -40,7 +25,7 @@ def test_no_kept_candidate_runs_against_the_course(default_net: roadnets.RoadNet
     config = mapmatch.MatchConfig()
     pruned = 0
     for trace in _trips(default_net):
-        _, _, solution = _solved(default_net, trace, config)
+        _, _, solution = solved(default_net, trace, config)
         course = solution.course_deg[solution.used]
         assert np.isfinite(course).mean() > 0.5  # a drive at 1 s has a course nearly throughout
         c = solution.cands
@@ -48,7 +33,7 @@ def test_no_kept_candidate_runs_against_the_course(default_net: roadnets.RoadNet
             bearings = c.bearing_deg[c.ptr[t] : c.ptr[t + 1]]
             off = np.abs((bearings - course[t] + 180.0) % 360.0 - 180.0)
             assert (off <= config.course_prune_deg).all()
-        _, _, unpruned = _solved(default_net, trace, config.replace({"course_prune_deg": 0.0}))
+        _, _, unpruned = solved(default_net, trace, config.replace({"course_prune_deg": 0.0}))
         pruned += len(unpruned.cands) - len(c)
     assert pruned > 0  # the two-way roads' wrong directions were there to drop
 
@@ -89,7 +74,7 @@ def test_a_trellis_over_some_observations_keeps_their_candidates(
     # and paces, the bridge's observations keep the candidates they had (in a trellis of
     # their own both are ends, with no course)
     config = mapmatch.MatchConfig()
-    obs, all_cands, solution = _solved(default_net, _trips(default_net, count=1)[0], config)
+    obs, all_cands, solution = solved(default_net, _trips(default_net, count=1)[0], config)
     c, used = solution.cands, solution.used
     never = np.zeros(2, dtype=bool)
     differs = 0
