@@ -31,6 +31,7 @@ import threading
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from functools import partial
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 from mapmatch.errors import MapMatchError
@@ -50,6 +51,7 @@ __all__ = [
     "WorkerLostError",
     "available_cores",
     "make_executor",
+    "unshadowed",
 ]
 
 T = TypeVar("T")
@@ -156,6 +158,39 @@ def _call_shared(fn: Callable[[T, object], R], task: T) -> R:
     return fn(task, _WORKER_SHARED[0])
 
 
+def unshadowed(preload: Sequence[str], cwd: Path | None = None) -> list[str]:
+    """
+    The modules of ``preload`` a fork server started here would import as this process did.
+
+    A fork server is started as ``python -c`` in this process's working directory and (up to
+    Python 3.11) keeps its own ``sys.path``, whose first entry is that directory: a package of
+    the same name there (a checkout of another version, a snapshot) would be what it imports,
+    and every worker forked from it would run that copy while this process runs its own. Such
+    modules are left to the workers, which import them with this process's ``sys.path``.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     (Path(tmp) / "mapmatch").mkdir()
+    ...     _ = (Path(tmp) / "mapmatch" / "__init__.py").write_text("")
+    ...     unshadowed(["mapmatch.batch", "json"], cwd=Path(tmp))
+    ['json']
+    """
+    here = (cwd if cwd is not None else Path.cwd()).resolve()
+    kept = []
+    for name in preload:
+        top = name.partition(".")[0]
+        found = sys.modules.get(top)
+        origin = getattr(found, "__file__", None)
+        ours = origin is not None and Path(origin).resolve().parent.parent == here
+        local = (here / top / "__init__.py").exists() or (here / f"{top}.py").exists()
+        if local and not ours:
+            continue
+        kept.append(name)
+    return kept
+
+
 class ProcessExecutor:
     """
     A local pool of worker processes (:class:`~concurrent.futures.ProcessPoolExecutor`).
@@ -180,7 +215,7 @@ class ProcessExecutor:
         ctx: BaseContext
         if "forkserver" in multiprocessing.get_all_start_methods():
             server = multiprocessing.get_context("forkserver")
-            server.set_forkserver_preload(list(preload))
+            server.set_forkserver_preload(unshadowed(preload))
             ctx = server
         else:
             ctx = multiprocessing.get_context("spawn")
