@@ -181,11 +181,9 @@ def unshadowed(preload: Sequence[str], cwd: Path | None = None) -> list[str]:
     kept = []
     for name in preload:
         top = name.partition(".")[0]
-        found = sys.modules.get(top)
-        origin = getattr(found, "__file__", None)
-        ours = origin is not None and Path(origin).resolve().parent.parent == here
-        local = (here / top / "__init__.py").exists() or (here / f"{top}.py").exists()
-        if local and not ours:
+        local = [p for p in (here / top / "__init__.py", here / f"{top}.py") if p.exists()]
+        origin = getattr(sys.modules.get(top), "__file__", None)
+        if local and (origin is None or Path(origin).resolve() not in local):
             continue
         kept.append(name)
     return kept
