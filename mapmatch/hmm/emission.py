@@ -159,8 +159,17 @@ def road_class_score(edge_class, speed, pace, params):  # type: ignore[no-untype
 
 @njit(cache=True, nogil=True, inline="always")
 def angle_between(a, b):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    """Absolute difference of two directions, degrees in [0, 180] (NaN when one is NaN)."""
-    return abs((a - b + 180.0) % 360.0 - 180.0)
+    """
+    Absolute difference of two directions, degrees in [0, 180] (NaN when one is NaN).
+
+    NaN returns before the modulo: libm's ``fmod`` takes a slow path on NaN (about 125 ns a
+    call against 9 on the benchmark machine), and a sparse trace's observations have no
+    course, so the trellis asked it once per candidate for nothing.
+    """
+    turned = a - b + 180.0
+    if np.isnan(turned):
+        return abs(turned)
+    return abs(turned % 360.0 - 180.0)
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -5,7 +5,7 @@ import pytest
 
 from mapmatch.config import MatchConfig
 from mapmatch.errors import ConfigError
-from mapmatch.hmm.emission import heading_weight, log_emission, log_heading
+from mapmatch.hmm.emission import angle_between, heading_weight, log_emission, log_heading
 from mapmatch.hmm.routes import ROUTE_SAME_EDGE, ROUTE_UTURN, ROUTE_VIA_GRAPH, candidate_pairs
 from mapmatch.hmm.transition import TRAVEL_CHORD_SHARE, driving_on_explains, log_transition
 
@@ -28,6 +28,16 @@ def test_heading_counts_more_the_faster_the_car() -> None:
     near = log_heading(np.array([355.0]), np.array([5.0]), np.array([1.0]), cfg)
     assert near[0] == pytest.approx(-0.5 * (10 / cfg.heading_sigma_deg) ** 2)
     assert log_heading(np.array([np.nan]), np.array([5.0]), np.array([1.0]), cfg)[0] == 0.0
+
+
+def test_angle_between_is_the_modulo_formula_nan_included() -> None:
+    # the compiled function returns NaN before its modulo: the same values as the formula
+    values = [0.0, 5.0, 179.9, 180.0, 355.0, 359.99, -90.0, 720.5, np.nan, np.inf, -np.inf]
+    for a in values:
+        for b in values:
+            want = abs((a - b + 180.0) % 360.0 - 180.0)
+            got = angle_between(a, b)
+            assert (np.isnan(got) and np.isnan(want)) or got == want, (a, b, got, want)
 
 
 def test_transition_is_exponential_in_the_distance_mismatch() -> None:
