@@ -19,10 +19,12 @@ class Trellis:
 
 
 @st.composite
-def small_trellises(draw: st.DrawFn, max_steps: int = 5, max_states: int = 4) -> Trellis:
+def small_trellises(
+    draw: st.DrawFn, max_steps: int = 5, max_states: int = 4, lowest: float = -20
+) -> Trellis:
     steps = draw(st.integers(2, max_steps))
     width = draw(st.integers(1, max_states))
-    finite = st.floats(min_value=-20, max_value=0, allow_nan=False)
+    finite = st.floats(min_value=lowest, max_value=0, allow_nan=False)
     em = np.array(draw(st.lists(finite, min_size=steps * width, max_size=steps * width)))
     tr_size = (steps - 1) * width * width
     tr = np.array(draw(st.lists(finite, min_size=tr_size, max_size=tr_size)))
@@ -79,6 +81,29 @@ def test_posteriors_are_the_brute_force_marginals(trellis: Trellis) -> None:
     expected = brute_force_marginals(trellis)
     assert np.allclose(post, expected, atol=1e-9)
     assert np.allclose(post.sum(axis=1), 1.0)
+
+
+@settings(max_examples=100)
+@given(trellis=small_trellises(max_steps=4, max_states=3, lowest=-3000))
+def test_posteriors_hold_where_scores_span_more_than_a_float_does(trellis: Trellis) -> None:
+    # scores hundreds of nats apart: a pass in probability space would lose these marginals
+    # in subnormal numbers (tried: off by 1e-9 here); the log-space pass keeps them
+    steps = len(trellis.log_emission)
+    post = posteriors(trellis.log_emission, trellis.log_transition, [(0, steps)])
+    assert np.allclose(post, brute_force_marginals(trellis), atol=1e-9)
+
+
+def test_a_piece_whose_only_way_on_is_far_below_the_best_start_keeps_its_marginals() -> None:
+    # the way on leaves from the start 1,000 nats down: in probability space, rescaled at
+    # each fix, every path through the first step would be 0
+    em = np.array([[0.0, -1000.0], [0.0, -1.0], [0.0, 0.0]])
+    tr = np.full((2, 2, 2), -np.inf)
+    tr[0, 1, :] = [0.0, -2.0]
+    tr[1] = [[0.0, -3.0], [-1.0, 0.0]]
+    post = posteriors(em, tr, [(0, 3)])
+    assert np.allclose(post, brute_force_marginals(Trellis(em, tr)), atol=1e-12)
+    assert post[0, 0] == 0.0
+    assert post[0, 1] == pytest.approx(1.0)
 
 
 @st.composite
