@@ -20,8 +20,8 @@ loop).
 
 What it measures, and what not: a warm loop over the kept calls (in the flow a kernel runs
 colder: ``kernel_time.py`` says by how much); the counter reads keep LLVM from moving work
-across statements, so the copy runs a little slower than the kernel (both are printed, on
-the same calls). Its first finding: ``angle_between`` spent 14 us of a Krems 30 s trace's
+across statements, so the copy's time differs a little from the kernel's (both are printed,
+on the same calls). Its first finding: ``angle_between`` spent 14 us of a Krems 30 s trace's
 solve in libm's ``fmod`` on NaN courses. The copy is compiled fresh, never cached (it holds
 this process's address of the counters), a few seconds to a minute.
 """
@@ -139,7 +139,13 @@ def instrumented_source(
         return out
 
     body = definition.body
-    docstring = body[:1] if body and isinstance(body[0], ast.Expr) else []
+    first = body[0] if body else None
+    documented = (
+        isinstance(first, ast.Expr)
+        and isinstance(first.value, ast.Constant)
+        and isinstance(first.value.value, str)
+    )
+    docstring = body[:1] if documented else []
     start = ast.parse(f"_ticks = counters_at({address}, {MAX_STATEMENTS})\n_t0 = rdtsc()").body
     definition.body = [*docstring, *start, *instrument(body[len(docstring) :], 0)]
     if len(statements) > MAX_STATEMENTS:

@@ -76,5 +76,10 @@ def test_the_table_of_a_kernel_reached_from_the_solve(capsys: pytest.CaptureFixt
     assert any("_pair_routes(" in row[3] for row in rows)
     assert all(row[2].startswith("transition.py:") for row in rows)
     shares = [float(row[1].rstrip("%")) for row in rows]
-    assert sum(shares) == pytest.approx(100.0, abs=1.0)
     assert shares == sorted(shares, reverse=True)
+    # the statements are part of the copy's calls: the counter's rate agrees with the clock
+    copy_us = float(head.split("the profiled copy ")[1].split(" us")[0])
+    statements_us = float(
+        head.split("of which the statements of transitions_kernel ")[1].split()[0]
+    )
+    assert 0.1 * copy_us < statements_us < 1.5 * copy_us
