@@ -27,6 +27,7 @@ __all__ = [
     "radius_of_sigma",
     "search_radii",
     "sigma_radius_kernel",
+    "sigmas_radius",
 ]
 
 #: Directed edges searched per fix, per road place the trellis keeps (``max_candidates``): a
@@ -131,6 +132,12 @@ class Candidates:
         )
 
 
+@njit(cache=True, nogil=True, inline="always")
+def sigmas_radius(sigma, sigmas, floor_m, ceiling_m):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """A radius of ``sigmas`` position sigmas, at least ``floor_m`` and at most ``ceiling_m``."""
+    return min(max(floor_m, sigmas * sigma), ceiling_m)
+
+
 @njit(cache=True, nogil=True)
 def sigma_radius_kernel(n, accuracy, sigma_m, radius_m, factor, max_radius):  # type: ignore[no-untyped-def]  # pragma: no cover
     """
@@ -144,7 +151,7 @@ def sigma_radius_kernel(n, accuracy, sigma_m, radius_m, factor, max_radius):  # 
         sigma[i] = np.fmax(sigma_m, accuracy[i])
     radius = np.empty(n)
     for i in range(n):
-        radius[i] = min(max(radius_m, factor * sigma[i]), max_radius)
+        radius[i] = sigmas_radius(sigma[i], factor, radius_m, max_radius)
     return sigma, radius
 
 

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numba import njit
 
-from mapmatch.hmm.candidates import Candidates
+from mapmatch.hmm.candidates import Candidates, sigmas_radius
 from mapmatch.hmm.emission import (
     angle_between,
     chord_pace,
@@ -161,7 +161,7 @@ def _core_reach(c_dist, lo, hi, sigma, params):  # type: ignore[no-untyped-def] 
     ``search_radius_m``) and the ``far_candidates`` nearest beyond it; every row when none is
     within the core.
     """
-    core_m = max(params[P_SEARCH_RADIUS], params[P_CORE_RADIUS_SIGMAS] * sigma)
+    core_m = sigmas_radius(sigma, params[P_CORE_RADIUS_SIGMAS], params[P_SEARCH_RADIUS], np.inf)
     core = lo
     while core < hi and c_dist[core] <= core_m:
         core += 1
