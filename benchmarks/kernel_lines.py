@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import functools
 import importlib
 import inspect
 import sys
@@ -60,8 +61,9 @@ class Statement:
     text: str
 
 
+@functools.cache
 def _cycle_reader() -> tuple[Any, Any]:
-    """The compiled ``rdtsc()`` and ``counters_at(address, n)`` the profiled copy calls."""
+    """The compiled ``rdtsc()`` and ``counters_at(address, n)`` a profiled copy calls; made once."""
     from llvmlite import ir
     from numba import carray, njit, types
     from numba.extending import intrinsic
