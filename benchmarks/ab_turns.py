@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/ab_turns.py --variant base=/tmp/old-tree --variant new=. \
         [--variant novec=.:NUMBA_LOOP_VECTORIZE=0,NUMBA_CACHE_DIR=/tmp/nc-novec] \
+        [--variant tail=.:AB_TURNS_CUT=mapmatch.hmm.assemble._assemble_kernel:free] \
         [--set krems_at_2013:15s_10m:positions ...] [--set sim:15:25:20] \
         [--rounds 100] [--passes 3] [--evict-mb 0] [--sets-dir .bench/peers/sets]
 
@@ -20,6 +21,15 @@ print ``equal``). The baseline's tree once more under another name shows the sit
 memory before every pass, so that each pass starts cold, as in the peer comparison, where
 the other peers' passes run between two of ours.
 
+A variant may also stand for a bound rather than a version: with the setting
+``AB_TURNS_CUT=KERNEL:free`` (``KERNEL`` a compiled kernel's ``module.name``) each match stops
+right after that kernel returns, so the variant times everything before it: what the rest
+would cost if it took no time at all; with ``AB_TURNS_CUT=KERNEL:kernels`` the compiled
+kernels that ran after it in a pass before run again on that pass's arguments, one right
+after another with no Python between them: what the rest would cost if its Python did. Two
+such variants with the same tree price a stage of the match, its kernels and its Python
+apart, under the same turns; their documents column says ``cut``.
+
 A set is a trace file of the peer comparison, ``EXTRACT:SET:INPUT``: ``krems_at_2013:15s_10m:
 positions`` is ``krems_at_2013/15s_10m/positions.csv`` in ``--sets-dir`` (a folder a
 ``compare_peers.py`` run wrote, ``.bench/peers/sets`` unless said: every run simulates the
@@ -36,6 +46,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import functools
 import hashlib
 import json
 import os
@@ -46,10 +57,13 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from kernel_time import ROOT, SHARED
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
 
 SETS = ROOT / ".bench" / "peers" / "sets"
 #: What a worker prints when its sets are loaded and matched once.
@@ -164,6 +178,107 @@ def _write_simulated(
 
 # --------------------------------------------------------------------------- the worker
 
+#: The setting (an environment variable of a variant) that makes it a bound: see the module.
+CUT_SETTING = "AB_TURNS_CUT"
+CUT_MODES = ("free", "kernels")
+
+
+class _CutReached(BaseException):
+    """Raised right after the cut kernel returns: it passes every ``except Exception``."""
+
+
+class StageCut:
+    """
+    Matches ended right after one kernel (:data:`CUT_SETTING`), and what came after it.
+
+    :meth:`learn` runs a trace's match in full once and keeps the kernel calls made after the
+    cut kernel's first call, with their arguments; :meth:`run` then matches the trace up to
+    that call and, in ``kernels`` mode, makes the kept calls again.
+    """
+
+    def __init__(self, spec: str) -> None:
+        name, _, mode = spec.rpartition(":")
+        if mode not in CUT_MODES or "." not in name:
+            msg = f"bad {CUT_SETTING}={spec!r}; write MODULE.KERNEL:free or MODULE.KERNEL:kernels"
+            raise SystemExit(msg)
+        self.name, self.mode = name, mode
+        self.after: dict[object, list[tuple[Any, tuple[Any, ...]]]] = {}
+        self.recording: list[tuple[Any, tuple[Any, ...]]] | None = None
+        self.learning = True
+        self._bound: list[tuple[Any, str, Any]] = []
+
+    def install(self) -> None:
+        """
+        Stand in for every binding of our kernels (all compiled: a warm-up ran), and the cut's.
+
+        The cut is a kernel (every module's binding of it) or any other function or class a
+        loaded module binds under that name (that binding alone: the Python it runs is
+        before the cut).
+        """
+        from kernel_time import our_kernels
+
+        self._bound = list(our_kernels())
+        labels = {f"{k.py_func.__module__}.{k.py_func.__name__}" for _, _, k in self._bound}
+        module_name, _, attr = self.name.rpartition(".")
+        module = sys.modules.get(module_name)
+        other = None if self.name in labels or module is None else getattr(module, attr, None)
+        if self.name not in labels and not callable(other):
+            msg = f"{CUT_SETTING}: nothing loaded is named {self.name} (kernels: {sorted(labels)})"
+            raise SystemExit(msg)
+        for bound_in, bound_as, kernel in self._bound:
+            label = f"{kernel.py_func.__module__}.{kernel.py_func.__name__}"
+            setattr(bound_in, bound_as, _CutStandIn(kernel, self, cut=label == self.name))
+        if other is not None:
+            self._bound.append((module, attr, other))
+            setattr(module, attr, _CutStandIn(other, self, cut=True))
+
+    def learn(self, key: object, match: Callable[[], object]) -> None:
+        """Match once in full, keeping the kernel calls after the cut's (``key``: the trace)."""
+        self.recording = None
+        match()
+        self.after[key] = self.recording or []
+        self.recording = None
+
+    def stop_learning(self) -> None:
+        """Only the cut kernel's stand-in stays: the kernels before it run as they are."""
+        self.learning = False
+        for module, attr, kernel in self._bound:
+            if not getattr(module, attr).cut:
+                setattr(module, attr, kernel)
+
+    def uninstall(self) -> None:
+        """Every binding its own callable again (a test's process matches on)."""
+        for module, attr, value in self._bound:
+            setattr(module, attr, value)
+        self._bound = []
+
+    def run(self, key: object, match: Callable[[], object]) -> None:
+        """Match up to the cut, then (``kernels``) the kept calls after it."""
+        try:
+            match()
+        except _CutReached:
+            if self.mode == "kernels":
+                for kernel, args in self.after.get(key, ()):
+                    kernel(*args)
+
+
+class _CutStandIn:
+    """A kernel's stand-in while a :class:`StageCut` learns or cuts."""
+
+    def __init__(self, kernel: Any, cut_of: StageCut, *, cut: bool) -> None:
+        self.kernel, self.cut_of, self.cut = kernel, cut_of, cut
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        out = self.kernel(*args, **kwargs)  # kernels take no keywords; other cuts may
+        stage = self.cut_of
+        if stage.recording is not None:
+            stage.recording.append((self.kernel, args))
+        elif self.cut:
+            if not stage.learning:
+                raise _CutReached
+            stage.recording = []
+        return out
+
 
 def worker(sets: list[dict[str, Any]], passes: int, evict_mb: int = 0) -> None:
     """
@@ -191,20 +306,41 @@ def worker(sets: list[dict[str, Any]], passes: int, evict_mb: int = 0) -> None:
             digest.update(_without_timings(geojson_bytes(mapmatch.match(trace, net, config))))
         digests.append(digest.hexdigest()[:16])
         jobs.append((net, traces, config))
+    spec = os.environ.get(CUT_SETTING)
+    stage = None if spec is None else StageCut(spec)
+    if stage is not None:
+        stage.install()
+        for s, (net, traces, config) in enumerate(jobs):
+            for t, trace in enumerate(traces):
+                stage.learn((s, t), functools.partial(_document, trace, net, config))
+        stage.stop_learning()
+        digests = ["cut"] * len(jobs)
     print(json.dumps({READY: str(Path(mapmatch.__file__).parent), "digests": digests}), flush=True)
     other = np.ones(evict_mb * 2**20 // 8)
     for _ in sys.stdin:
         times = []
-        for net, traces, config in jobs:
+        for s, (net, traces, config) in enumerate(jobs):
             best = float("inf")
             for _ in range(passes):
                 other.sum()
                 start = time.process_time()
-                for trace in traces:
-                    geojson_bytes(mapmatch.match(trace, net, config))
+                if stage is None:
+                    for trace in traces:
+                        geojson_bytes(mapmatch.match(trace, net, config))
+                else:
+                    for t, trace in enumerate(traces):
+                        stage.run((s, t), functools.partial(_document, trace, net, config))
                 best = min(best, time.process_time() - start)
             times.append(best / len(traces) * 1e6)
         print(json.dumps(times), flush=True)
+
+
+def _document(trace: Any, net: Any, config: Any) -> bytes:
+    """A trace's match and GeoJSON text, as the passes make them."""
+    import mapmatch
+    from mapmatch.export import geojson_bytes
+
+    return geojson_bytes(mapmatch.match(trace, net, config))
 
 
 def _without_timings(document: bytes) -> bytes:
@@ -331,6 +467,7 @@ def report(
                 q1, q3 = paired[len(paired) // 4], paired[(3 * len(paired)) // 4]
                 ratio = f"{statistics.median(paired):.3f} ({q1:.3f}-{q3:.3f})"
                 same = "equal" if digests[v.name][i] == digests[base][i] else "differ"
+                same = "cut" if digests[v.name][i] == "cut" else same
             median = statistics.median(mine)
             lines.append(f"| {s.label} | {v.name} | {median:.1f} | {ratio} | {same} |")
     return "\n".join(lines)

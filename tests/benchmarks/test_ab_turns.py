@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
 
 from tests.benchmarks.scripts import load_script
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
 
 ab_turns = load_script("ab_turns.py")
 ROOT = Path(__file__).resolve().parents[2]
@@ -65,3 +70,54 @@ def test_a_document_is_compared_without_its_timings() -> None:
     assert ab_turns._without_timings(a) == ab_turns._without_timings(b)
     assert ab_turns._without_timings(a) != ab_turns._without_timings(c)
     assert ab_turns._without_timings(b"{not json") == b"{not json"  # compared as it is
+
+
+def test_a_cut_ends_each_match_after_its_kernel_and_replays_what_came_after(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import mapmatch.export
+    import roadnets
+
+    traces = load_script("bench_fixed_cost.py").traces_of(roadnets.load(), 15.0, 6, 2)
+    net = roadnets.load()
+
+    def document(trace: object) -> Callable[[], object]:
+        return functools.partial(ab_turns._document, trace, net, None)
+
+    for trace in traces:  # every kernel compiled before the stand-ins
+        document(trace)()
+    stage = ab_turns.StageCut("mapmatch.hmm.assemble._assemble_kernel:kernels")
+    stage.install()
+    try:
+        for t, trace in enumerate(traces):
+            stage.learn(t, document(trace))
+        after = {kernel.py_func.__name__ for kernel, _ in stage.after[0]}
+        assert {"inverse_kernel", "_from_network", "_write_rows"} <= after
+        assert not after & {"solve_kernel", "_assemble_kernel", "nearby_kernel"}
+        stage.stop_learning()
+        replayed: list[int] = []
+        stage.after[0] = [(lambda: replayed.append(1), ())]
+        written: list[int] = []
+        real = mapmatch.export.geojson_bytes
+        monkeypatch.setattr(
+            mapmatch.export, "geojson_bytes", lambda r: written.append(1) or real(r)
+        )
+        stage.run(0, document(traces[0]))
+        assert (replayed, written) == ([1], [])  # stopped at the cut, then the kept calls
+        stage.mode = "free"
+        stage.run(0, document(traces[0]))
+        assert (replayed, written) == ([1], [])
+    finally:
+        stage.uninstall()
+    assert len(real(mapmatch.match(traces[0], net))) > 0  # the kernels are bound again
+
+
+def test_a_cut_names_what_it_needs() -> None:
+    with pytest.raises(SystemExit, match=r"write MODULE\.KERNEL:free or MODULE\.KERNEL:kernels"):
+        ab_turns.StageCut("mapmatch.hmm.assemble._assemble_kernel")
+    with pytest.raises(SystemExit, match=r"write MODULE\.KERNEL:free"):
+        ab_turns.StageCut("nowhere:free")
+    stage = ab_turns.StageCut("mapmatch.nowhere.kernel:free")
+    with pytest.raises(SystemExit, match=r"nothing loaded is named mapmatch\.nowhere\.kernel"):
+        stage.install()
+    stage.uninstall()
