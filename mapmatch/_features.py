@@ -205,8 +205,8 @@ def feature_columns(result: MatchResult) -> Packed:
         :data:`FLOAT_COLUMNS` and :data:`INT_COLUMNS` (:data:`BOOL_COLUMNS` read as flags);
         the edges' names are UTF-8 in its ``text``, from ``name_start`` to ``name_stop``.
     """
-    segs = result.segments
-    paths = SegmentPaths.of(segs)
+    placed = result.placed  # the assembly's arrays, where the result was not read yet
+    paths = SegmentPaths.of(result.segments) if placed is None else placed.paths
     path_arrays = (paths.index, paths.first, paths.last, paths.bounds, paths.edge, paths.start_m,
                    paths.end_m)  # fmt: skip
     p = result.points
@@ -216,13 +216,13 @@ def feature_columns(result: MatchResult) -> Packed:
         p.segment, p.matched, p.edge, p.offset_m, read_only(p.time_s), p.lon, p.lat, p.distance_m,
         p.confidence, p.u, p.v, p.key, p.interpolated, p.outlier,
     )  # fmt: skip
-    net = _one_network(segs)
+    net = _one_network(result.segments) if placed is None else placed.net
     inputs = None if net is None else _network_inputs(net)
     if inputs is not None:
         text, network = inputs
         floats, floats_at, ints, ints_at = _from_network(path_arrays, points, network)
     else:
-        text, whole, real, vertices = _known(segs)
+        text, whole, real, vertices = _known(result.segments)
         floats, floats_at, ints, ints_at = _from_segments(
             path_arrays, points, whole, real, vertices
         )

@@ -168,7 +168,7 @@ def measured_chord(
     """
     from mapmatch._measure import measure_kernel  # compiled: imported when first asked for
 
-    lo, hi, complete, chord = measure_kernel(
+    span = measure_kernel(
         np.ascontiguousarray(matched, np.bool_),
         np.ascontiguousarray(outlier, np.bool_),
         int(segments),
@@ -176,8 +176,21 @@ def measured_chord(
         np.ascontiguousarray(x, np.float64),
         np.ascontiguousarray(y, np.float64),
     )
-    _, complete, odometer = _span_of(lo, hi, len(matched), complete, odometer_m)
-    return complete, odometer, float(chord)
+    return chord_of_span(span, len(matched), odometer_m)
+
+
+def chord_of_span(
+    span: tuple[int, int, bool, float], n: int, odometer_m: FloatArray | None
+) -> tuple[bool, FloatArray | None, float]:
+    """
+    :func:`measured_chord`'s answer from the compiled measure's ``(lo, hi, complete, chord)``.
+
+    ``n`` is the number of fixes. The assembly's call measures the span too
+    (:class:`~mapmatch.hmm.assemble.Assembled`'s ``span``).
+    """
+    lo, hi, complete, chord = span
+    _, whole, odometer = _span_of(lo, hi, n, complete, odometer_m)
+    return whole, odometer, float(chord)
 
 
 def check_distance(

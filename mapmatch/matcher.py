@@ -18,11 +18,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from mapmatch.config import MatchConfig
-from mapmatch.distance import Evidence, check_distance, measured_chord
+from mapmatch.distance import Evidence, check_distance, chord_of_span, measured_chord
 from mapmatch.errors import DeadlineExceededError, NoCandidatesError
 from mapmatch.hmm.assemble import assemble, path_uturns
 from mapmatch.hmm.detours import drop_detour_fixes
-from mapmatch.hmm.ends import odometer_ends
+from mapmatch.hmm.ends import moves_ends, odometer_ends
 from mapmatch.hmm.fixes import (
     Fixes,
     estimated_sigma_m,
@@ -33,7 +33,7 @@ from mapmatch.hmm.fixes import (
 )
 from mapmatch.hmm.selection import find_displaced
 from mapmatch.hmm.trellis import model_fixes, repair_breaks, solve
-from mapmatch.result import Diagnostics, MatchResult, MatchStats, Segment
+from mapmatch.result import Diagnostics, MatchResult, MatchStats, PlacedArrays, Segment
 from mapmatch.trace import check_match_inputs
 
 if TYPE_CHECKING:
@@ -167,13 +167,31 @@ def match(
         config,
     )
     _check_deadline(deadline, trace, "assembly")
-    segments, points = odometer_ends(
-        net, assembled.segments, assembled.points, trace.odometer_m, config, fixes.radius_m, (x, y)
-    )
-    matched_length = float(sum(s.length_m for s in segments))
-    complete, odometer, chord = measured_chord(
-        points.matched, points.outlier, len(segments), trace.odometer_m, x, y
-    )
+    placed = assembled.placed
+    if moves_ends(trace.odometer_m, config) and len(placed.lengths):
+        segments, points = odometer_ends(
+            net,
+            placed.segments(),
+            assembled.points,
+            trace.odometer_m,
+            config,
+            fixes.radius_m,
+            (x, y),
+        )
+        matched_length = float(sum(s.length_m for s in segments))
+        complete, odometer, chord = measured_chord(
+            points.matched, points.outlier, len(segments), trace.odometer_m, x, y
+        )
+        matched_points = int(np.count_nonzero(points.matched))
+        outliers = int(np.count_nonzero(points.outlier))
+        breaks = [s.first for s in segments[1:]]
+        made: PlacedArrays | list[Segment] = segments
+    else:  # the assembly's arrays are the result, its numbers from the assembly's call
+        made, points = placed, assembled.points
+        matched_length = float(sum(placed.lengths.tolist()))
+        complete, odometer, chord = chord_of_span(assembled.span, n, trace.odometer_m)
+        matched_points, outliers = assembled.matched_points, assembled.outliers
+        breaks = placed.paths.first[1:].tolist()
     check = check_distance(
         trace_id=trace.trace_id,
         matched_length_m=matched_length,
@@ -189,7 +207,7 @@ def match(
     timings["total"] = sum(timings.values())
     stats = MatchStats(
         points=n,
-        matched_points=int(np.count_nonzero(points.matched)),
+        matched_points=matched_points,
         candidates=len(cands),
         reordered_rows=trace.report.reordered_rows,
         input_rows=trace.report.input_rows,
@@ -200,15 +218,15 @@ def match(
         timings_s=timings,
         warnings=tuple(trace.report.warnings),
         model_points=len(solution.used),
-        outliers=int(np.count_nonzero(points.outlier)),
+        outliers=outliers,
         break_repairs=repairs,
     )
-    return MatchResult(
+    return MatchResult.of_placed(
+        made,  # the arrays' segments are made when read
+        points=points,
         trace_id=trace.trace_id,
         network=_network_ids(net),
-        segments=segments,
-        points=points,
-        breaks=[s.first for s in segments[1:]],
+        breaks=breaks,
         matched_length_m=matched_length,
         distance_check=check,
         stats=stats,

@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     import numpy.typing as npt
     import pandas as pd
 
+    from mapmatch._timing import SegmentPaths
     from mapmatch.config import MatchConfig
     from mapmatch.distance import DistanceCheck
     from mapmatch.export import GeoKind
@@ -40,6 +41,7 @@ __all__ = [
     "MatchStats",
     "MatchedEdge",
     "MatchedPoints",
+    "PlacedArrays",
     "Segment",
     "Stretches",
 ]
@@ -177,12 +179,15 @@ class Segment:
         given.
     attributes, lon, lat
         Already known attributes and geometry (an unpickled segment).
+    length_m
+        The path's length where already added (by the assembly; :attr:`length_m` to the bit).
     """
 
     __slots__ = (
         "_attributes",
         "_edges",
         "_lat",
+        "_length_m",
         "_lon",
         "_net",
         "_stretches",
@@ -208,6 +213,7 @@ class Segment:
         lon: FloatArray | None = None,
         lat: FloatArray | None = None,
         stretches: Stretches | None = None,
+        length_m: float | None = None,
     ) -> None:
         if net is None and (attributes is None or lon is None or lat is None or stretches is None):
             msg = "Segment needs the network, or its attributes and geometry"
@@ -221,6 +227,7 @@ class Segment:
         self._lon, self._lat = lon, lat
         self._stretches = stretches
         self._edges: list[MatchedEdge] | None = None
+        self._length_m = length_m
 
     def __repr__(self) -> str:
         return (
@@ -253,9 +260,12 @@ class Segment:
     @property
     def length_m(self) -> float:
         """Metres along the path, from the first fix's place to the last's."""
-        from mapmatch._sums import path_length_m  # compiled: imported when first asked for
+        if self._length_m is None:
+            from mapmatch._sums import path_length_m  # compiled: imported when first asked for
 
-        return float(path_length_m(self.start_offset_m, self.end_offset_m, 0, len(self.edge)))
+            length = path_length_m(self.start_offset_m, self.end_offset_m, 0, len(self.edge))
+            self._length_m = float(length)
+        return self._length_m
 
     @property
     def driven_m(self) -> FloatArray:
@@ -503,6 +513,48 @@ class Diagnostics:
         return pd.DataFrame(columns)
 
 
+class PlacedArrays:
+    """
+    A match's segments as the assembly's arrays: the :class:`Segment` objects made when read.
+
+    A :class:`MatchResult` holds one until its :attr:`~MatchResult.segments` are first read,
+    so that a caller who only writes the document (:func:`mapmatch.export.geojson_bytes`, the
+    batch's and the service's GeoJSON) never makes them: the document is written from these
+    arrays, the same values.
+
+    Attributes
+    ----------
+    paths
+        Every segment's path end to end (:class:`~mapmatch._timing.SegmentPaths`).
+    lengths
+        Each segment's :attr:`Segment.length_m`, added as it adds it.
+    net
+        The network matched on.
+    """
+
+    __slots__ = ("_segments", "lengths", "net", "paths")
+
+    def __init__(self, paths: SegmentPaths, lengths: FloatArray, net: RoadNetwork) -> None:
+        self.paths, self.lengths, self.net = paths, lengths, net
+        self._segments: list[Segment] | None = None
+
+    def segments(self) -> list[Segment]:
+        """The paths as :class:`Segment` objects (their stretches: views of the arrays), once."""
+        if self._segments is None:
+            p = self.paths
+            bounds, first, last = p.bounds.tolist(), p.first.tolist(), p.last.tolist()
+            index, lengths = p.index.tolist(), self.lengths.tolist()
+            self._segments = [
+                Segment(
+                    index[s], first[s], last[s], p.edge[bounds[s] : bounds[s + 1]],
+                    p.start_m[bounds[s] : bounds[s + 1]], p.end_m[bounds[s] : bounds[s + 1]],
+                    net=self.net, length_m=lengths[s],
+                )
+                for s in range(len(index))
+            ]  # fmt: skip
+        return self._segments
+
+
 @quick_init
 @dataclass(frozen=True)
 class MatchResult:
@@ -531,6 +583,9 @@ class MatchResult:
         Counts and timings.
     diagnostics
         The model's candidates and scores when asked for (``match(..., diagnostics=True)``).
+
+    A result made by :func:`mapmatch.match` makes its ``segments`` when they are first read
+    (:class:`PlacedArrays`); pickled, it carries them made.
     """
 
     trace_id: str
@@ -543,6 +598,59 @@ class MatchResult:
     stats: MatchStats
     diagnostics: Diagnostics | None = None
     config: MatchConfig | None = field(default=None, repr=False)
+
+    @classmethod
+    def of_placed(
+        cls,
+        placed: PlacedArrays | list[Segment],
+        *,
+        points: MatchedPoints,
+        trace_id: str,
+        network: dict[str, str],
+        breaks: list[int],
+        matched_length_m: float,
+        distance_check: DistanceCheck,
+        stats: MatchStats,
+        diagnostics: Diagnostics | None = None,
+        config: MatchConfig | None = None,
+    ) -> MatchResult:
+        """
+        A result whose ``segments`` are made from ``placed`` when first read.
+
+        ``placed`` may also be the segments already made (then held as they are).
+        """
+        result = cls.__new__(cls)
+        result.__dict__.update(
+            trace_id=trace_id, network=network, points=points, breaks=breaks,
+            matched_length_m=matched_length_m, distance_check=distance_check, stats=stats,
+            diagnostics=diagnostics, config=config,
+        )  # fmt: skip
+        made = "segments" if isinstance(placed, list) else "_placed"
+        result.__dict__[made] = placed
+        return result
+
+    def __getattr__(self, name: str) -> Any:
+        """The ``segments`` of a result that still holds them as arrays: made now."""
+        values = self.__dict__
+        placed = values.get("_placed")
+        if placed is None or name != "segments":
+            msg = f"{type(self).__name__!r} object has no attribute {name!r}"
+            raise AttributeError(msg)
+        segments = values["segments"] = placed.segments()
+        del values["_placed"]
+        return segments
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled with its segments made (the arrays' network stays behind)."""
+        if "_placed" in self.__dict__:
+            self.__getattr__("segments")
+        return self.__dict__
+
+    @property
+    def placed(self) -> PlacedArrays | None:
+        """The arrays its segments are still to be made from (``None`` once made)."""
+        placed: PlacedArrays | None = self.__dict__.get("_placed")
+        return placed
 
     def __repr__(self) -> str:
         p = self.points

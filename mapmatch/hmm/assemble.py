@@ -24,6 +24,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from mapmatch._measure import measure_kernel
+from mapmatch._sums import path_length_m
+from mapmatch._timing import SegmentPaths
 from mapmatch.frozen import quick_init
 from mapmatch.hmm.geometry import point_on_edge, project_kernel, stretch_vertices
 from mapmatch.hmm.loops import chosen_scatter_kernel
@@ -32,12 +35,14 @@ from mapmatch.hmm.observations import travel_arrays
 from mapmatch.hmm.params import model_params
 from mapmatch.hmm.pathwalk import walk_pieces
 from mapmatch.readonly import kernel_array
-from mapmatch.result import MatchedPoints, Segment
+from mapmatch.result import MatchedPoints, PlacedArrays
+from roadnets.tmerc import inverse_kernel
 
 if TYPE_CHECKING:
     from mapmatch.config import MatchConfig
     from mapmatch.hmm.observations import Observations
     from mapmatch.hmm.solution import Solution
+    from mapmatch.result import Segment
     from mapmatch.trace import Trace
     from mapmatch.types import BoolArray, FloatArray
     from roadnets import RoadNetwork
@@ -48,13 +53,27 @@ __all__ = ["Assembled", "assemble", "fixes_on_piece", "path_uturns"]
 @quick_init
 @dataclass(frozen=True, slots=True)
 class Assembled:
-    """Segments and per-fix outcome of a solved trace."""
+    """
+    Segments (as arrays: :attr:`segments` made when read) and per-fix outcome of a solved trace.
 
-    segments: list[Segment]
+    With them what the result's numbers read of them, computed in the assembly's call: the
+    matched and flagged fixes' counts and the distance check's span over the fixes
+    (:func:`~mapmatch._measure.measure_kernel`'s ``(lo, hi, complete, chord)``).
+    """
+
+    placed: PlacedArrays
     points: MatchedPoints
     jumps: int  # moves that could not continue from the path's front (drawn as a jump)
     loops: int  # loops the fixes did not support, taken out
     uturns: int  # U-turns on the segments' paths (:func:`path_uturns`)
+    matched_points: int
+    outliers: int
+    span: tuple[int, int, bool, float]
+
+    @property
+    def segments(self) -> list[Segment]:
+        """The connected pieces (made on first use)."""
+        return self.placed.segments()
 
 
 @njit(cache=True, nogil=True)
@@ -83,10 +102,13 @@ def _locate(edge, start_m, end_m, along):  # type: ignore[no-untyped-def]  # pra
 
 @njit(cache=True, nogil=True)
 def _assemble_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
-    network, walk, place, loops
+    network, walk, place, loops, tail
 ):
     """
     :func:`walk_pieces`, then :func:`_place` on its paths: one call (argument tuples of each).
+
+    Then what the result's numbers read of them (:func:`_tail`; ``tail`` is
+    ``(has_odometer, inverse)``).
 
     ``network`` is the network's :func:`~mapmatch.hmm.network_inputs.network_inputs`: the
     network arrays of each tuple are taken from it.
@@ -125,7 +147,39 @@ def _assemble_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - comp
     uturns = 0
     for p in range(len(t_ptr) - 1):
         uturns += path_uturns(network.walk_net[4], t_edge, t_ptr[p], t_ptr[p + 1])
-    return placed, jumps.sum(), removed.sum(), uturns
+    return placed, jumps.sum(), removed.sum(), uturns, _tail(placed, fixes[0], fixes[1], *tail)
+
+
+@njit(cache=True, nogil=True)
+def _tail(placed, x, y, has_odometer, inverse):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """
+    What the result's numbers read of the placed paths and the fixes, in the assembly's call.
+
+    Each segment's length, the matched and flagged counts, the distance check's span
+    (:func:`~mapmatch._measure.measure_kernel`) and the matched places in lon/lat
+    (``inverse``: whether the network's CRS has a compiled projection, then its
+    :attr:`~roadnets.tmerc.TransverseMercator.inverse_parameters`; empty without one). The
+    same functions compute them as where they are read otherwise
+    (:attr:`~mapmatch.result.Segment.length_m`, :func:`~mapmatch.distance.measured_chord`,
+    :meth:`~roadnets.RoadNetwork.unproject`), so the numbers agree to the bit.
+    """
+    (t_ptr, _, t_lo, t_hi), _, _, per_fix, flagged = placed
+    matched, px, py = per_fix[0], per_fix[6], per_fix[7]
+    lengths = np.empty(len(t_ptr) - 1)
+    for s in range(len(lengths)):
+        lengths[s] = path_length_m(t_lo, t_hi, t_ptr[s], t_ptr[s + 1])
+    span = measure_kernel(matched, flagged, len(lengths), has_odometer, x, y)
+    known, lon_0, northing_0, scale, from_gauss, to_sphere = inverse
+    if known:
+        lon, lat = inverse_kernel(px, py, lon_0, northing_0, scale, from_gauss, to_sphere)
+    else:
+        lon, lat = np.empty(0), np.empty(0)
+    return lengths, matched.sum(), flagged.sum(), span, lon, lat
+
+
+#: ``_tail``'s ``inverse`` for a network whose CRS has no compiled projection: the same types
+#: as one's (``(True, *TransverseMercator.inverse_parameters)``), so one compiled variant.
+_NO_INVERSE = (False, 0.0, 0.0, 1.0, np.zeros(1), np.zeros(1))
 
 
 @njit(cache=True, nogil=True)
@@ -402,39 +456,31 @@ def assemble(
         (float(config.thinning_sigmas), float(config.standstill_m)),
         c.distance_m,
     )
-    placed, jumps, removed, uturns = _assemble_kernel(network_inputs(net), walk, place, loops)
+    compiled = net.projector.compiled
+    inverse = _NO_INVERSE if compiled is None else (True, *compiled.inverse_parameters)
+    placed, jumps, removed, uturns, numbers = _assemble_kernel(
+        network_inputs(net), walk, place, loops, (trace.odometer_m is not None, inverse)
+    )
     (t_ptr, t_edge, t_lo, t_hi), first_fix, last_fix, per_fix, flagged = placed
     matched, interpolated, edge, offset, confidence, segment_of, px, py, distance, u, v, key = (
         per_fix
     )
-    segments = [
-        Segment(
-            p, int(first_fix[p]), int(last_fix[p]), t_edge[lo:hi], t_lo[lo:hi], t_hi[lo:hi], net=net
-        )
-        for p, (lo, hi) in enumerate(zip(t_ptr[:-1].tolist(), t_ptr[1:].tolist(), strict=True))
-    ]
-    lon, lat = net.unproject(px, py)
+    lengths, matched_points, outliers, span, lon, lat = numbers
+    if compiled is None:  # a CRS the kernels cannot unproject
+        lon, lat = net.unproject(px, py)
+    paths = SegmentPaths(np.arange(len(t_ptr) - 1), first_fix, last_fix, t_ptr, t_edge, t_lo, t_hi)
     return Assembled(
-        segments=segments,
+        placed=PlacedArrays(paths, lengths, net),
         points=MatchedPoints(
-            time_s=trace.time_s,
-            raw_lon=trace.lon,
-            raw_lat=trace.lat,
-            matched=matched,
-            edge=edge,
-            u=u,
-            v=v,
-            key=key,
-            offset_m=offset,
-            distance_m=distance,
-            lon=lon,
-            lat=lat,
-            confidence=confidence,
-            segment=segment_of,
-            interpolated=interpolated,
+            time_s=trace.time_s, raw_lon=trace.lon, raw_lat=trace.lat, matched=matched,
+            edge=edge, u=u, v=v, key=key, offset_m=offset, distance_m=distance, lon=lon,
+            lat=lat, confidence=confidence, segment=segment_of, interpolated=interpolated,
             outlier=flagged,
         ),
         jumps=int(jumps),
         loops=int(removed),
         uturns=int(uturns),
-    )
+        matched_points=int(matched_points),
+        outliers=int(outliers),
+        span=(int(span[0]), int(span[1]), bool(span[2]), float(span[3])),
+    )  # fmt: skip

@@ -250,6 +250,11 @@ def _ends_kernel(  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     )  # fmt: skip
 
 
+def moves_ends(odometer_m: FloatArray | None, config: MatchConfig) -> bool:
+    """Whether :func:`odometer_ends` may move segments' ends: an odometer, and the setting on."""
+    return odometer_m is not None and config.odometer_end_sigmas > 0
+
+
 def odometer_ends(
     net: RoadNetwork,
     segments: list[Segment],
@@ -275,7 +280,7 @@ def odometer_ends(
     ``fix_xy`` are the fixes' projected positions when already known (``net.project`` of
     the points' ``raw_lon`` and ``raw_lat``).
     """
-    if odometer_m is None or config.odometer_end_sigmas <= 0 or not segments:
+    if not moves_ends(odometer_m, config) or not segments:
         return segments, points
     paths = SegmentPaths.of(segments)
     fix_x, fix_y = net.project(points.raw_lon, points.raw_lat) if fix_xy is None else fix_xy

@@ -13,7 +13,7 @@ import pytest
 import mapmatch
 from mapmatch import export
 from mapmatch._jsontext import py_round
-from mapmatch.evaluation.simulate import SimulationConfig, simulate_trips
+from mapmatch.evaluation.simulate import SimulationConfig, simulate_trips, with_columns
 from mapmatch.viz import candidate_table
 from tests.benchmarks.scripts import load_script
 
@@ -415,3 +415,55 @@ def test_an_edited_street_name_is_written_as_edited() -> None:
     text = export.geojson_bytes(edited)
     assert json.dumps(edited.to_geojson(), allow_nan=False, separators=(",", ":")).encode() == text
     assert set(_edge_names(json.loads(text))) == {'Avenue "Nouvelle"', *_AWKWARD_NAMES[1:]}
+
+
+def test_a_result_makes_its_segments_when_read_and_writes_its_document_without_them(
+    default_net: roadnets.RoadNetwork,
+) -> None:
+    cfg = SimulationConfig(interval_s=15.0, outlier_rate=0.05, outage_rate=0.1)
+    for trip in simulate_trips(default_net, cfg, count=4, seed=5):
+        trace = with_columns(trip.trace, ("heading", "speed"))  # no odometer to move the ends
+        result = mapmatch.match(trace, default_net)
+        assert result.placed is not None  # the assembly's arrays, no Segment made yet
+        from_arrays = export.geojson_bytes(result)
+        assert result.placed is not None  # the document did not need them
+        segments = result.segments  # read: made now, and kept
+        assert result.placed is None
+        assert result.segments is segments
+        assert export.geojson_bytes(result) == from_arrays  # the objects' document is the same
+        for s in segments:  # the assembly added each length as the segment adds it
+            again = mapmatch.Segment(
+                s.index, s.first, s.last, s.edge, s.start_offset_m, s.end_offset_m, net=default_net
+            )
+            assert again.length_m == s.length_m
+        assert sum(s.length_m for s in segments) == result.matched_length_m
+        assert result.breaks == [s.first for s in segments[1:]]
+
+
+def test_a_result_not_read_yet_pickles_copies_and_replaces_with_its_segments(
+    default_net: roadnets.RoadNetwork,
+) -> None:
+    trip = simulate_trips(default_net, SimulationConfig(interval_s=15.0), count=1, seed=6)[0]
+    trace = with_columns(trip.trace, ())
+    result = mapmatch.match(trace, default_net)
+    document = export.geojson_bytes(result)
+    fresh = pickle.loads(pickle.dumps(mapmatch.match(trace, default_net)))
+    assert fresh.placed is None
+    assert fresh.segments[0]._net is None  # carries its geometry, not the network
+    assert len(fresh.segments) == len(result.segments)
+    renamed = dataclasses.replace(mapmatch.match(trace, default_net), trace_id="renamed")
+    assert renamed.placed is None
+    assert [s.edge.tolist() for s in renamed.segments] == [s.edge.tolist() for s in result.segments]
+    assert export.geojson_bytes(result) == document
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        _ = result.nothing
+
+
+def test_moved_ends_make_the_segments_at_once(default_net: roadnets.RoadNetwork) -> None:
+    trip = simulate_trips(default_net, SimulationConfig(interval_s=15.0), count=1, seed=7)[0]
+    assert trip.trace.odometer_m is not None
+    result = mapmatch.match(trip.trace, default_net)
+    assert result.placed is None  # the odometer moved the ends: segments made as moved
+    off = mapmatch.match(trip.trace, default_net, mapmatch.MatchConfig(odometer_end_sigmas=0))
+    assert off.placed is not None
+    assert sum(s.length_m for s in result.segments) == result.matched_length_m
