@@ -636,8 +636,8 @@ class MatchResult:
         if placed is None or name != "segments":
             msg = f"{type(self).__name__!r} object has no attribute {name!r}"
             raise AttributeError(msg)
-        segments = values["segments"] = placed.segments()
-        del values["_placed"]
+        segments: list[Segment] = values.setdefault("segments", placed.segments())
+        values.pop("_placed", None)  # another thread may have read them at the same time
         return segments
 
     def __getstate__(self) -> dict[str, Any]:
