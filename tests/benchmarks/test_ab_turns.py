@@ -92,7 +92,7 @@ def test_a_cut_ends_each_match_after_its_kernel_and_replays_what_came_after(
         for t, trace in enumerate(traces):
             stage.learn(t, document(trace))
         after = {kernel.py_func.__name__ for kernel, _ in stage.after[0]}
-        assert {"inverse_kernel", "_from_network", "_write_rows"} <= after
+        assert {"_from_network", "_write_rows"} <= after
         assert not after & {"solve_kernel", "_assemble_kernel", "nearby_kernel"}
         stage.stop_learning()
         replayed: list[int] = []
