@@ -280,13 +280,17 @@ class _CutStandIn:
         return out
 
 
-def worker(sets: list[dict[str, Any]], passes: int, evict_mb: int = 0) -> None:
+def worker(
+    sets: list[dict[str, Any]], passes: int, evict_mb: int = 0, evict_pages: bool = False
+) -> None:
     """
     Load the sets, say where ``mapmatch`` came from, then time a round on each ``go``.
 
     ``evict_mb``: before each pass, that many MB of other memory are read (untimed), so the
     pass starts with the caches holding none of the match's code or data, as a pass of the
-    peer comparison does after the other peers' passes.
+    peer comparison does after the other peers' passes. ``evict_pages``: one value of each
+    of its 4 KB pages instead, in a random order, so that the address translations (TLB,
+    page-walk caches) are cold too, as after a peer's look-ups in a table of gigabytes.
     """
     import numpy as np
 
@@ -317,12 +321,20 @@ def worker(sets: list[dict[str, Any]], passes: int, evict_mb: int = 0) -> None:
         digests = ["cut"] * len(jobs)
     print(json.dumps({READY: str(Path(mapmatch.__file__).parent), "digests": digests}), flush=True)
     other = np.ones(evict_mb * 2**20 // 8)
+    pages = np.random.default_rng(0).permutation(np.arange(0, len(other), 4096 // 8))
+
+    def evict() -> None:
+        if evict_pages:
+            other[pages].sum()
+        else:
+            other.sum()
+
     for _ in sys.stdin:
         times = []
         for s, (net, traces, config) in enumerate(jobs):
             best = float("inf")
             for _ in range(passes):
-                other.sum()
+                evict()
                 start = time.process_time()
                 if stage is None:
                     for trace in traces:
@@ -361,7 +373,12 @@ class Worker:
     """A variant's process, loaded and warm: asked for a round, it answers its times."""
 
     def __init__(
-        self, variant: Variant, sets: list[TraceSet], passes: int, evict_mb: int = 0
+        self,
+        variant: Variant,
+        sets: list[TraceSet],
+        passes: int,
+        evict_mb: int = 0,
+        evict_pages: bool = False,
     ) -> None:
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(
@@ -381,6 +398,7 @@ class Worker:
                 str(passes),
                 "--evict-mb",
                 str(evict_mb),
+                *(["--evict-pages"] if evict_pages else []),
             ],
             cwd=tempfile.gettempdir(),  # not a tree: only PYTHONPATH says which mapmatch
             env=env,
@@ -427,13 +445,18 @@ class Worker:
 
 
 def run_turns(
-    variants: list[Variant], sets: list[TraceSet], rounds: int, passes: int, evict_mb: int = 0
+    variants: list[Variant],
+    sets: list[TraceSet],
+    rounds: int,
+    passes: int,
+    evict_mb: int = 0,
+    evict_pages: bool = False,
 ) -> tuple[dict[str, list[list[float]]], dict[str, list[str]]]:
     """Each variant's us a trace per round and set, and its documents' digests per set."""
     workers: dict[str, Worker] = {}
     try:
         for v in variants:
-            workers[v.name] = Worker(v, sets, passes, evict_mb)
+            workers[v.name] = Worker(v, sets, passes, evict_mb, evict_pages)
         times: dict[str, list[list[float]]] = {v.name: [] for v in variants}
         for r in range(rounds):
             for v in variants if r % 2 == 0 else variants[::-1]:
@@ -482,11 +505,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--evict-mb", type=int, default=0, help="MB of other memory read before each pass"
     )
+    p.add_argument(
+        "--evict-pages",
+        action="store_true",
+        help="read one value of each 4 KB page of that memory, in a random order",
+    )
     p.add_argument("--sets-dir", type=Path, default=SETS, help="where the peer sets are")
     p.add_argument("--worker", help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     if a.worker is not None:
-        worker(json.loads(a.worker), a.passes, a.evict_mb)
+        worker(json.loads(a.worker), a.passes, a.evict_mb, a.evict_pages)
         return 0
     if len(a.variant) < 2:
         p.error("give at least two --variant")
@@ -499,8 +527,9 @@ def main(argv: list[str] | None = None) -> int:
         sets = [parse_set(s, Path(scratch), a.sets_dir) for s in a.set or ["sim:15:25:20"]]
         load = os.getloadavg()[0]
         began = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
-        times, digests = run_turns(variants, sets, a.rounds, a.passes, a.evict_mb)
-    evicted = f", {a.evict_mb} MB read before each" if a.evict_mb else ""
+        times, digests = run_turns(variants, sets, a.rounds, a.passes, a.evict_mb, a.evict_pages)
+    how = " (a value a page, in a random order)" if a.evict_pages else ""
+    evicted = f", {a.evict_mb} MB read{how} before each" if a.evict_mb else ""
     print(
         f"{began}, {a.rounds} rounds of {a.passes} passes{evicted}, load average {load:.2f} at the "
         f"start and {os.getloadavg()[0]:.2f} at the end; CPU us a trace, match + GeoJSON\n"

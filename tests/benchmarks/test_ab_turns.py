@@ -27,11 +27,13 @@ def test_two_variants_of_one_tree_take_turns_and_write_the_same_documents(
             "--set", "sim:15:6:2",
             "--rounds", "2",
             "--passes", "1",
+            "--evict-mb", "1",
+            "--evict-pages",
         ]
     )  # fmt: skip
     assert code == 0
     out = capsys.readouterr().out
-    assert "2 rounds of 1 passes" in out
+    assert "2 rounds of 1 passes, 1 MB read (a value a page, in a random order) before each" in out
     rows = [line.split("|")[1:-1] for line in out.splitlines() if line.startswith("| sim:")]
     assert [r[1].strip() for r in rows] == ["base", "again"]
     assert float(rows[0][2]) > 0
