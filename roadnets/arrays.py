@@ -14,6 +14,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
+from roadnets.pages import advise_huge_pages
+
 if TYPE_CHECKING:
     from pathlib import Path
 
@@ -167,6 +169,7 @@ class NetworkArrays:
         buffer: np.ndarray = (
             np.memmap(path, dtype=np.uint8, mode="r") if mmap else np.fromfile(path, dtype=np.uint8)
         )
+        advise_huge_pages(buffer)  # 2 MB pages where possible (not a mapping: nothing)
         values = {}
         for name, (dtype, shape, offset) in layout.items():
             dt = np.dtype(dtype)

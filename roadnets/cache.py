@@ -21,6 +21,7 @@ from typing import Any
 
 from roadnets.arrays import NetworkArrays
 from roadnets.errors import CacheError
+from roadnets.pages import read_mapped
 
 __all__ = [
     "FORMAT_VERSION",
@@ -82,11 +83,14 @@ def ensure_writable(cache_dir: Path) -> None:
 
 
 def file_checksum(path: Path) -> str:
-    """BLAKE2b (16 bytes) of a file's content, hex: the check of a cache file's integrity."""
+    """
+    BLAKE2b (16 bytes) of a file's content, hex: the check of a cache file's integrity.
+
+    Read through a mapping on 2 MB pages (:func:`~roadnets.pages.read_mapped`), so that the
+    page cache holds the file as the arrays' own mappings of it want it.
+    """
     digest = hashlib.blake2b(digest_size=16)
-    with path.open("rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
+    read_mapped(path, digest.update)
     return digest.hexdigest()
 
 

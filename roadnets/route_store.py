@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from roadnets.cache import file_checksum, put_in_place
+from roadnets.pages import advise_huge_pages
 
 if TYPE_CHECKING:
     from roadnets.arrays import NetworkArrays
@@ -235,7 +236,9 @@ def read_table(
                 raise ValueError(msg)
             # copy-on-write: shared pages, never written, and writeable like a table built
             # here, so the compiled matcher sees one array type for both
-            loaded[name] = np.asarray(np.load(path, mmap_mode="c", allow_pickle=False))
+            mapped = np.load(path, mmap_mode="c", allow_pickle=False)
+            advise_huge_pages(mapped)  # before its pages are read: 2 MB ones where possible
+            loaded[name] = np.asarray(mapped)
         if n != turns.n_edges or len(loaded["ptr"]) != n + 1:
             msg = f"it holds {n:,} edges, the network {turns.n_edges:,}"
             raise ValueError(msg)
