@@ -192,8 +192,8 @@ class StageCut:
     Matches ended right after one kernel (:data:`CUT_SETTING`), and what came after it.
 
     :meth:`learn` runs a trace's match in full once and keeps the kernel calls made after the
-    cut kernel's first call, with their arguments; :meth:`run` then matches the trace up to
-    that call and, in ``kernels`` mode, makes the kept calls again.
+    cut's first call (and the cut's own later calls), with their arguments; :meth:`run` then
+    matches the trace up to that call and, in ``kernels`` mode, makes the kept calls again.
     """
 
     def __init__(self, spec: str) -> None:
@@ -202,8 +202,8 @@ class StageCut:
             msg = f"bad {CUT_SETTING}={spec!r}; write MODULE.KERNEL:free or MODULE.KERNEL:kernels"
             raise SystemExit(msg)
         self.name, self.mode = name, mode
-        self.after: dict[object, list[tuple[Any, tuple[Any, ...]]]] = {}
-        self.recording: list[tuple[Any, tuple[Any, ...]]] | None = None
+        self.after: dict[object, list[tuple[Any, tuple[Any, ...], dict[str, Any]]]] = {}
+        self.recording: list[tuple[Any, tuple[Any, ...], dict[str, Any]]] | None = None
         self.learning = True
         self._bound: list[tuple[Any, str, Any]] = []
 
@@ -258,8 +258,8 @@ class StageCut:
             match()
         except _CutReached:
             if self.mode == "kernels":
-                for kernel, args in self.after.get(key, ()):
-                    kernel(*args)
+                for kernel, args, kwargs in self.after.get(key, ()):
+                    kernel(*args, **kwargs)
 
 
 class _CutStandIn:
@@ -272,7 +272,7 @@ class _CutStandIn:
         out = self.kernel(*args, **kwargs)  # kernels take no keywords; other cuts may
         stage = self.cut_of
         if stage.recording is not None:
-            stage.recording.append((self.kernel, args))
+            stage.recording.append((self.kernel, args, kwargs))
         elif self.cut:
             if not stage.learning:
                 raise _CutReached

@@ -93,12 +93,12 @@ def test_a_cut_ends_each_match_after_its_kernel_and_replays_what_came_after(
     try:
         for t, trace in enumerate(traces):
             stage.learn(t, document(trace))
-        after = {kernel.py_func.__name__ for kernel, _ in stage.after[0]}
+        after = {kernel.py_func.__name__ for kernel, _, _ in stage.after[0]}
         assert {"_from_network", "_write_rows"} <= after
         assert not after & {"solve_kernel", "_assemble_kernel", "nearby_kernel"}
         stage.stop_learning()
         replayed: list[int] = []
-        stage.after[0] = [(lambda: replayed.append(1), ())]
+        stage.after[0] = [(lambda value: replayed.append(value), (), {"value": 1})]
         written: list[int] = []
         real = mapmatch.export.geojson_bytes
         monkeypatch.setattr(
