@@ -33,7 +33,7 @@ from mapmatch.hmm.fixes import (
 )
 from mapmatch.hmm.selection import find_displaced
 from mapmatch.hmm.trellis import model_fixes, repair_breaks, solve
-from mapmatch.result import Diagnostics, MatchResult, MatchStats, PlacedArrays, Segment
+from mapmatch.result import Diagnostics, MatchResult, MatchStats, Segment
 from mapmatch.trace import check_match_inputs
 
 if TYPE_CHECKING:
@@ -185,9 +185,9 @@ def match(
         matched_points = int(np.count_nonzero(points.matched))
         outliers = int(np.count_nonzero(points.outlier))
         breaks = [s.first for s in segments[1:]]
-        made: PlacedArrays | list[Segment] = segments
+        deferred = None
     else:  # the assembly's arrays are the result, its numbers from the assembly's call
-        made, points = placed, assembled.points
+        segments, points, deferred = [], assembled.points, placed
         matched_length = float(sum(placed.lengths.tolist()))
         complete, odometer, chord = chord_of_span(assembled.span, n, trace.odometer_m)
         matched_points, outliers = assembled.matched_points, assembled.outliers
@@ -221,11 +221,11 @@ def match(
         outliers=outliers,
         break_repairs=repairs,
     )
-    return MatchResult.of_placed(
-        made,  # the arrays' segments are made when read
-        points=points,
+    result = MatchResult(
         trace_id=trace.trace_id,
         network=_network_ids(net),
+        segments=segments,
+        points=points,
         breaks=breaks,
         matched_length_m=matched_length,
         distance_check=check,
@@ -233,6 +233,9 @@ def match(
         diagnostics=_diagnostics(net, obs, solution) if diagnostics else None,
         config=config,
     )
+    if deferred is not None:
+        result.defer_segments(deferred)  # made when read: the document needs none
+    return result
 
 
 #: ``MatchResult.network`` of each network matched on (its id, file name and CRS), made once.

@@ -599,35 +599,16 @@ class MatchResult:
     diagnostics: Diagnostics | None = None
     config: MatchConfig | None = field(default=None, repr=False)
 
-    @classmethod
-    def of_placed(
-        cls,
-        placed: PlacedArrays | list[Segment],
-        *,
-        points: MatchedPoints,
-        trace_id: str,
-        network: dict[str, str],
-        breaks: list[int],
-        matched_length_m: float,
-        distance_check: DistanceCheck,
-        stats: MatchStats,
-        diagnostics: Diagnostics | None = None,
-        config: MatchConfig | None = None,
-    ) -> MatchResult:
+    def defer_segments(self, placed: PlacedArrays) -> None:
         """
-        A result whose ``segments`` are made from ``placed`` when first read.
+        Make this new result's ``segments`` from ``placed`` when they are first read.
 
-        ``placed`` may also be the segments already made (then held as they are).
+        For :func:`mapmatch.match`, which makes the result with no segments and hands it the
+        assembly's arrays: the segments given to the constructor are dropped.
         """
-        result = cls.__new__(cls)
-        result.__dict__.update(
-            trace_id=trace_id, network=network, points=points, breaks=breaks,
-            matched_length_m=matched_length_m, distance_check=distance_check, stats=stats,
-            diagnostics=diagnostics, config=config,
-        )  # fmt: skip
-        made = "segments" if isinstance(placed, list) else "_placed"
-        result.__dict__[made] = placed
-        return result
+        values = self.__dict__
+        del values["segments"]
+        values["_placed"] = placed
 
     def __getattr__(self, name: str) -> Any:
         """The ``segments`` of a result that still holds them as arrays: made now."""
