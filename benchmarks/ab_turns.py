@@ -40,6 +40,14 @@ outliers of 40 m) on the extract (the embedded network without one), simulated o
 written to a file every variant reads. A tree needs its kernels compiled (its first start
 takes about a minute, once); a variant with settings that change the compiled code wants a
 ``NUMBA_CACHE_DIR`` of its own.
+
+The processes start in the order the variants are listed, and on this shared machine the
+earlier ones ran slower: four processes of one tree, 1-5 % between the first started and the
+last, in whichever order they were listed (stop 64). So a version gets two processes, listed
+first and last around the other's two (``--variant base=OLD --variant new=. --variant
+new2=. --variant base2=OLD``), and variants that run the same tree with the same settings
+are pooled in a second table: per round the mean of their processes, against the first
+variant's version's, so that the start order cancels.
 """
 
 from __future__ import annotations
@@ -496,6 +504,42 @@ def report(
     return "\n".join(lines)
 
 
+def pooled_report(
+    variants: list[Variant], sets: list[TraceSet], times: dict[str, list[list[float]]]
+) -> str:
+    """
+    Per set and version (a tree and its settings), its processes pooled: the table, or "".
+
+    Each round's time of a version is the mean of its processes'; the ratio is the median of
+    the rounds' ratios to the first variant's version, with its quartiles. Empty where no
+    version has more than one process.
+    """
+    versions: dict[tuple[Path, tuple[tuple[str, str], ...]], list[str]] = {}
+    for v in variants:
+        versions.setdefault((v.tree, tuple(sorted(v.env.items()))), []).append(v.name)
+    if all(len(names) == 1 for names in versions.values()):
+        return ""
+    groups = list(versions.values())
+    lines = [
+        "| set | version (processes) | us a trace (median) | / first (paired, quartiles) |",
+        "|---|---|--:|---|",
+    ]
+    for i, s in enumerate(sets):
+        pooled = [
+            [statistics.fmean(times[n][r][i] for n in names) for r in range(len(times[names[0]]))]
+            for names in groups
+        ]
+        for names, mine in zip(groups, pooled, strict=True):
+            ratio = ""
+            if names is not groups[0]:
+                paired = sorted(b / a for a, b in zip(pooled[0], mine, strict=True))
+                q1, q3 = paired[len(paired) // 4], paired[(3 * len(paired)) // 4]
+                ratio = f"{statistics.median(paired):.3f} ({q1:.3f}-{q3:.3f})"
+            label = " + ".join(names)
+            lines.append(f"| {s.label} | {label} | {statistics.median(mine):.1f} | {ratio} |")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--variant", action="append", default=[], help="NAME=TREE[:KEY=VALUE,...]")
@@ -535,6 +579,10 @@ def main(argv: list[str] | None = None) -> int:
         f"start and {os.getloadavg()[0]:.2f} at the end; CPU us a trace, match + GeoJSON\n"
     )
     print(report(variants, sets, times, digests))
+    pooled = pooled_report(variants, sets, times)
+    if pooled:
+        print("\nEach version's processes pooled (the start order cancels where they flank):\n")
+        print(pooled)
     return 0
 
 

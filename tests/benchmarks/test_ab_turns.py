@@ -123,3 +123,34 @@ def test_a_cut_names_what_it_needs() -> None:
     with pytest.raises(SystemExit, match=r"nothing loaded is named mapmatch\.nowhere\.kernel"):
         stage.install()
     stage.uninstall()
+
+
+def test_the_processes_of_one_version_are_pooled_round_by_round() -> None:
+    old, new = Path("/trees/old"), Path("/trees/new")
+    variants = [
+        ab_turns.Variant("base", old, {}),
+        ab_turns.Variant("new", new, {}),
+        ab_turns.Variant("new2", new, {}),
+        ab_turns.Variant("base2", old, {}),
+        ab_turns.Variant("tuned", new, {"NUMBA_OPT": "2"}),
+    ]
+    sets = [ab_turns.TraceSet("x", "x.csv", None, None)]
+    # the first started runs 10 % slow: pooled, the versions' ratio is the started-late mean's
+    times = {
+        "base": [[110.0], [110.0], [110.0]],
+        "new": [[90.0], [90.0], [90.0]],
+        "new2": [[90.0], [90.0], [90.0]],
+        "base2": [[100.0], [100.0], [100.0]],
+        "tuned": [[80.0], [85.0], [90.0]],
+    }
+    rows = [
+        [cell.strip() for cell in line.split("|")[1:-1]]
+        for line in ab_turns.pooled_report(variants, sets, times).splitlines()[2:]
+    ]
+    assert [r[1] for r in rows] == ["base + base2", "new + new2", "tuned"]
+    assert [float(r[2]) for r in rows] == [105.0, 90.0, 85.0]
+    assert rows[0][3] == ""
+    assert rows[1][3] == "0.857 (0.857-0.857)"  # 90 / 105
+    assert rows[2][3].startswith("0.810 ")  # 85 / 105, the middle round
+    # one process a version: nothing to pool
+    assert ab_turns.pooled_report(variants[:2], sets, {k: times[k] for k in ("base", "new")}) == ""
