@@ -5,8 +5,10 @@ A sparse trace's route-table look-ups land on a page each, and after other work 
 request's network, another program; in the peer comparison FMM's look-ups in a table of
 gigabytes) the address translations are as cold as the data: with 4 KB pages every look-up
 pays a page walk, with 2 MB pages a few hundred cover the table. Measured in turns
-(``benchmarks/ab_turns.py --evict-mb 1024 --evict-pages``, stop 63): 9-15 % off a Krems 30 s,
-Liechtenstein 15 s and Andorra 15 s trace; 2-3 % when only the caches are cold.
+(``benchmarks/ab_turns.py --evict-mb 1024 --evict-pages``): 9-15 % off a Krems 30 s,
+Liechtenstein 15 s and Andorra 15 s trace in a busy hour of the shared machine (stop 63), 2-3 %
+when only the caches are cold, and none in a quiet hour, when a page walk finds its tables in
+the caches (stop 64).
 
 Linux maps a file on 2 MB pages when the page cache holds it in 2 MB folios (ext4 and xfs
 make them on recent kernels) and the mapping asked for them (``MADV_HUGEPAGE``) before its
